@@ -1,0 +1,17 @@
+#pragma once
+// Subcommands of the `brickyard` command line. Each add_* registers its options and a
+// callback on the app; callbacks throw brickyard::Error and main() turns that into an exit code.
+
+#include <CLI/CLI.hpp>
+
+namespace brickyard::cli {
+
+struct GlobalOptions {
+  bool quiet = false;
+  int threads = 0;  ///< 0: all cores
+};
+
+void add_generate_command(CLI::App& app, const GlobalOptions& global);
+void add_version_command(CLI::App& app);
+
+}  // namespace brickyard::cli

@@ -1,0 +1,57 @@
+// The `brickyard` command line. Library code throws brickyard::Error; only this file decides
+// what the user sees and which exit code the process returns.
+
+#include <exception>
+#include <iostream>
+#include <memory>
+
+#include <tbb/global_control.h>
+
+#include "apps/commands.h"
+#include "core/error.h"
+#include "core/progress.h"
+
+int main(int argc, char** argv) {
+  using namespace brickyard;
+  CLI::App app{"brickyard: store, cache and render volumes far larger than memory", "brickyard"};
+  app.require_subcommand(0, 1);  // checked below, so that an unknown word is named as such
+  app.fallthrough();
+  cli::GlobalOptions global;
+  app.add_flag("-q,--quiet", global.quiet, "No progress output");
+  app.add_option("-j,--threads", global.threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 4096));
+
+  cli::add_generate_command(app, global);
+  cli::add_version_command(app);
+
+  std::unique_ptr<tbb::global_control> thread_limit;
+  app.parse_complete_callback([&] {
+    if (global.quiet) set_default_progress_style(ProgressStyle::quiet);
+    if (global.threads > 0)
+      thread_limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                           size_t(global.threads));
+  });
+
+  try {
+    app.parse(argc, argv);
+    if (app.get_subcommands().empty()) {
+      std::string names;
+      for (const auto* sub : app.get_subcommands({})) names += (names.empty() ? "" : ", ") + sub->get_name();
+      std::cerr << "brickyard: a subcommand is required (" << names << "); run with --help for more information\n";
+      return 2;
+    }
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    app.exit(e);  // prints CLI11's message
+    return 2;
+  } catch (const Error& e) {
+    std::cerr << "brickyard: error: " << e.what() << '\n';
+    return exit_code(e.code());
+  } catch (const std::exception& e) {
+    std::cerr << "brickyard: error: " << e.what() << '\n';
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,163 @@
+#include "core/raw_volume.h"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+
+namespace brickyard {
+
+using nlohmann::json;
+
+std::optional<uint64_t> checked_grid_bytes(const Vec3s& dims, ValueType t) {
+  if (dims.x < 1 || dims.y < 1 || dims.z < 1) return std::nullopt;
+  uint64_t n = static_cast<uint64_t>(dims.x);
+  if (__builtin_mul_overflow(n, static_cast<uint64_t>(dims.y), &n)) return std::nullopt;
+  if (__builtin_mul_overflow(n, static_cast<uint64_t>(dims.z), &n)) return std::nullopt;
+  if (__builtin_mul_overflow(n, static_cast<uint64_t>(size_of(t)), &n)) return std::nullopt;
+  if (n > static_cast<uint64_t>(INT64_MAX)) return std::nullopt;
+  return n;
+}
+
+std::string raw_sidecar_path(const std::string& raw_path) { return raw_path + ".json"; }
+
+void write_file_atomically(const std::string& path, const std::string& contents) {
+  const std::string tmp = path + ".partial";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path);
+  const bool ok = std::fwrite(contents.data(), 1, contents.size(), f) == contents.size() && std::fflush(f) == 0;
+  const int err = errno;
+  std::fclose(f);
+  if (!ok) {
+    std::remove(tmp.c_str());
+    throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(err))).with_file(path);
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    throw Error(Errc::io, fmt::format("cannot move into place: {}", ec.message())).with_file(path);
+  }
+}
+
+void write_raw_sidecar(const std::string& sidecar_path, const RawVolumeInfo& info) {
+  json j;
+  j["brickyard_raw"] = kRawSidecarVersion;
+  j["dims"] = {info.dims.x, info.dims.y, info.dims.z};
+  j["type"] = std::string(to_string(info.type));
+  j["endianness"] = info.little_endian ? "little" : "big";
+  j["spacing"] = {info.spacing.x, info.spacing.y, info.spacing.z};
+  j["origin"] = {info.origin.x, info.origin.y, info.origin.z};
+  j["value_range"] = {info.min_value, info.max_value};
+  if (info.quantization) j["quantization"] = {{"lo", info.quantization->first}, {"hi", info.quantization->second}};
+  j["source"] = info.source;
+  json params = json::object();
+  for (const auto& [k, v] : info.source_params) params[k] = v;
+  j["source_params"] = params;
+  j["bytes"] = info.bytes;
+  if (info.xxh3_64) j["xxh3_64"] = fmt::format("{:016x}", *info.xxh3_64);
+  write_file_atomically(sidecar_path, j.dump(2) + "\n");
+}
+
+namespace {
+
+// Typed access that names the key in every error.
+template <typename T>
+T get_as(const json& j, const char* key, const std::string& path) {
+  auto it = j.find(key);
+  if (it == j.end()) throw Error(Errc::format, "missing key").with_file(path).with_field(key);
+  try {
+    return it->get<T>();
+  } catch (const json::exception&) {
+    throw Error(Errc::format, fmt::format("wrong type ({})", it->type_name())).with_file(path).with_field(key);
+  }
+}
+
+template <typename T>
+Vec3<T> get_vec3(const json& j, const char* key, const std::string& path) {
+  auto v = get_as<std::vector<T>>(j, key, path);
+  if (v.size() != 3)
+    throw Error(Errc::format, fmt::format("expected 3 numbers, got {}", v.size())).with_file(path).with_field(key);
+  return {v[0], v[1], v[2]};
+}
+
+}  // namespace
+
+RawVolumeInfo read_raw_sidecar(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
+  json j;
+  try {
+    j = json::parse(in);
+  } catch (const json::parse_error& e) {
+    throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(path);
+  }
+  if (!j.is_object()) throw Error(Errc::format, "expected a JSON object").with_file(path);
+  const int version = get_as<int>(j, "brickyard_raw", path);
+  if (version > kRawSidecarVersion)
+    throw Error(Errc::unsupported, fmt::format("sidecar version {} is newer than this build reads ({})", version,
+                                               kRawSidecarVersion))
+        .with_file(path)
+        .with_field("brickyard_raw");
+
+  RawVolumeInfo info;
+  info.dims = get_vec3<int64_t>(j, "dims", path);
+  if (info.dims.x < 1 || info.dims.y < 1 || info.dims.z < 1)
+    throw Error(Errc::format, "every dimension must be at least 1").with_file(path).with_field("dims");
+  const auto type_name = get_as<std::string>(j, "type", path);
+  const auto type = parse_value_type(type_name);
+  if (!type)
+    throw Error(Errc::format, fmt::format("unknown value type '{}' (expected u8, u16 or f32)", type_name))
+        .with_file(path)
+        .with_field("type");
+  info.type = *type;
+  const auto endian = get_as<std::string>(j, "endianness", path);
+  if (endian != "little" && endian != "big")
+    throw Error(Errc::format, fmt::format("'{}' is neither 'little' nor 'big'", endian)).with_file(path).with_field("endianness");
+  info.little_endian = endian == "little";
+  info.spacing = get_vec3<double>(j, "spacing", path);
+  info.origin = get_vec3<double>(j, "origin", path);
+  auto range = get_as<std::vector<double>>(j, "value_range", path);
+  if (range.size() != 2 || range[0] > range[1])
+    throw Error(Errc::format, "expected [min, max] with min <= max").with_file(path).with_field("value_range");
+  info.min_value = range[0];
+  info.max_value = range[1];
+  if (auto q = j.find("quantization"); q != j.end()) {
+    info.quantization = {get_as<double>(*q, "lo", path), get_as<double>(*q, "hi", path)};
+  }
+  if (j.contains("source")) info.source = get_as<std::string>(j, "source", path);
+  if (auto p = j.find("source_params"); p != j.end() && p->is_object())
+    for (auto it = p->begin(); it != p->end(); ++it) info.source_params.emplace_back(it.key(), it.value().get<double>());
+  info.bytes = get_as<uint64_t>(j, "bytes", path);
+  if (j.contains("xxh3_64")) {
+    const auto hex = get_as<std::string>(j, "xxh3_64", path);
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long long v = std::strtoull(hex.c_str(), &end, 16);
+    if (hex.empty() || *end != '\0' || errno != 0)
+      throw Error(Errc::format, fmt::format("'{}' is not a hexadecimal checksum", hex)).with_file(path).with_field("xxh3_64");
+    info.xxh3_64 = v;
+  }
+  const auto grid_bytes = checked_grid_bytes(info.dims, info.type);
+  if (!grid_bytes)
+    throw Error(Errc::format, fmt::format("dims {}x{}x{} overflow a 64-bit byte count", info.dims.x, info.dims.y,
+                                          info.dims.z))
+        .with_file(path)
+        .with_field("dims");
+  const uint64_t expected = *grid_bytes;
+  if (info.bytes != expected)
+    throw Error(Errc::format, fmt::format("{} bytes does not match dims {}x{}x{} of {} ({} bytes)", info.bytes,
+                                          info.dims.x, info.dims.y, info.dims.z, to_string(info.type), expected))
+        .with_file(path)
+        .with_field("bytes");
+  return info;
+}
+
+}  // namespace brickyard

@@ -1,0 +1,17 @@
+#pragma once
+/// @file units.h
+/// @brief Human-readable numbers for progress lines, reports and error messages.
+
+#include <cstdint>
+#include <string>
+
+namespace brickyard {
+
+/// @brief 1234567 -> "1.23M" (SI prefixes k, M, G, T, P; three significant digits).
+std::string format_count(double n);
+/// @brief Bytes with binary prefixes: 1536 -> "1.50 KiB".
+std::string format_bytes(double bytes);
+/// @brief Seconds as "12.3 ms", "4.56 s", "3:07" or "1:02:03".
+std::string format_duration(double seconds);
+
+}  // namespace brickyard

@@ -1,0 +1,165 @@
+#include "fields/grid.h"
+
+#include <xxhash.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/error.h"
+#include "core/progress.h"
+
+namespace brickyard {
+
+double dequantize(double stored, ValueType type, const ValueRange& r) {
+  if (!is_integer(type)) return stored;
+  return r.lo + stored / integer_max(type) * (r.hi - r.lo);
+}
+
+GridSampler::GridSampler(const Field& field, const Vec3s& dims, ValueType type)
+    : field_(field), dims_(dims), type_(type) {
+  if (!checked_grid_bytes(dims, type))
+    throw Error(Errc::invalid_argument,
+                fmt::format("grid {}x{}x{} {} is empty or its byte size overflows 64 bits", dims.x, dims.y, dims.z,
+                            to_string(type)))
+        .with_field("size");
+  const Box3d d = field.domain();
+  for (int a = 0; a < 3; ++a) {
+    const double extent = d.hi[a] - d.lo[a];
+    if (dims[a] > 1) {
+      spacing_[a] = extent / double(dims[a] - 1);
+      offset_[a] = 0.0;
+    } else {
+      spacing_[a] = extent;
+      offset_[a] = extent / 2.0;
+    }
+  }
+}
+
+namespace {
+template <typename T>
+void sample_rows(const GridSampler& s, int64_t z0, int64_t z1, T* out) {
+  const Vec3s dims = s.dims();
+  const ValueRange q = s.quantization();
+  const int64_t rows = (z1 - z0) * dims.y;
+  tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows, 4), [&](const tbb::blocked_range<int64_t>& r) {
+    std::vector<double> row(size_t(dims.x));
+    for (int64_t i = r.begin(); i < r.end(); ++i) {
+      const int64_t z = z0 + i / dims.y, y = i % dims.y;
+      s.field().sample_row(s.position(0, y, z), s.spacing().x, dims.x, row.data());
+      T* dst = out + i * dims.x;
+      for (int64_t x = 0; x < dims.x; ++x) dst[x] = quantize<T>(row[size_t(x)], q);
+    }
+  });
+}
+}  // namespace
+
+void GridSampler::sample_slab(int64_t z0, int64_t z1, std::span<std::byte> out) const {
+  BY_CHECK(z0 >= 0 && z0 <= z1 && z1 <= dims_.z);
+  BY_CHECK_EQ(out.size(), size_t(z1 - z0) * slice_bytes());
+  dispatch_value_type(type_, [&](auto tag) {
+    using T = decltype(tag);
+    sample_rows<T>(*this, z0, z1, reinterpret_cast<T*>(out.data()));
+  });
+}
+
+void stream_grid(const GridSampler& sampler, int64_t slab_slices,
+                 const std::function<void(int64_t, int64_t, std::span<const std::byte>)>& sink, Progress* progress) {
+  const size_t slice = sampler.slice_bytes();
+  if (slab_slices <= 0) slab_slices = std::max<int64_t>(1, int64_t((32u << 20) / slice));
+  slab_slices = std::min(slab_slices, sampler.dims().z);
+  std::vector<std::byte> slab(size_t(slab_slices) * slice);
+  const int64_t voxels_per_slice = sampler.dims().x * sampler.dims().y;
+  for (int64_t z0 = 0; z0 < sampler.dims().z; z0 += slab_slices) {
+    const int64_t z1 = std::min(z0 + slab_slices, sampler.dims().z);
+    std::span<std::byte> bytes(slab.data(), size_t(z1 - z0) * slice);
+    sampler.sample_slab(z0, z1, bytes);
+    sink(z0, z1, bytes);
+    if (progress) progress->advance(uint64_t((z1 - z0) * voxels_per_slice));
+  }
+}
+
+namespace {
+struct FileCloser {
+  void operator()(std::FILE* f) const { if (f) std::fclose(f); }
+};
+
+template <typename T>
+void update_min_max(std::span<const std::byte> bytes, double& lo, double& hi) {
+  const T* v = reinterpret_cast<const T*>(bytes.data());
+  const size_t n = bytes.size() / sizeof(T);
+  T mn = std::numeric_limits<T>::max(), mx = std::numeric_limits<T>::lowest();
+  for (size_t i = 0; i < n; ++i) {
+    mn = std::min(mn, v[i]);
+    mx = std::max(mx, v[i]);
+  }
+  if (n) {
+    lo = std::min(lo, double(mn));
+    hi = std::max(hi, double(mx));
+  }
+}
+}  // namespace
+
+RawVolumeInfo write_raw_grid(const GridSampler& sampler, const std::string& path, Progress* progress) {
+  const std::string tmp = path + ".partial";
+  std::unique_ptr<std::FILE, FileCloser> file(std::fopen(tmp.c_str(), "wb"));
+  if (!file) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path);
+
+  std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> hash(XXH3_createState(), XXH3_freeState);
+  XXH3_64bits_reset(hash.get());
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  uint64_t written = 0;
+  try {
+    stream_grid(
+        sampler, 0,
+        [&](int64_t, int64_t, std::span<const std::byte> bytes) {
+          if (std::fwrite(bytes.data(), 1, bytes.size(), file.get()) != bytes.size())
+            throw Error(Errc::io, fmt::format("write failed after {} bytes: {}", written, std::strerror(errno)))
+                .with_file(path);
+          written += bytes.size();
+          XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
+          dispatch_value_type(sampler.type(), [&](auto tag) { update_min_max<decltype(tag)>(bytes, lo, hi); });
+        },
+        progress);
+    if (std::fflush(file.get()) != 0)
+      throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(errno))).with_file(path);
+  } catch (...) {
+    file.reset();
+    std::remove(tmp.c_str());
+    throw;
+  }
+  file.reset();
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    throw Error(Errc::io, fmt::format("cannot move into place: {}", ec.message())).with_file(path);
+  }
+
+  RawVolumeInfo info;
+  info.dims = sampler.dims();
+  info.type = sampler.type();
+  info.little_endian = true;
+  info.spacing = sampler.spacing();
+  info.origin = sampler.origin();
+  info.min_value = lo;
+  info.max_value = hi;
+  if (is_integer(sampler.type())) info.quantization = {{sampler.quantization().lo, sampler.quantization().hi}};
+  info.source = fmt::format("field {}", sampler.field().name());
+  for (const auto& p : sampler.field().params()) info.source_params.emplace_back(p.name, p.value);
+  info.bytes = written;
+  info.xxh3_64 = XXH3_64bits_digest(hash.get());
+  write_raw_sidecar(raw_sidecar_path(path), info);
+  return info;
+}
+
+}  // namespace brickyard

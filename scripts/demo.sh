@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# The main job on the built-in default dataset, as far as the pipeline goes today:
+# generate the default procedural volume (Marschner-Lobb, 256^3 f32) and describe it.
+# Outputs go to out/demo/ (override with BRICKYARD_OUT=dir).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+./scripts/build.sh release
+by=build/bin/brickyard
+out="${BRICKYARD_OUT:-out/demo}"
+mkdir -p "$out"
+
+"$by" version
+"$by" generate marschner-lobb --size 256 --type f32 --out "$out/default.raw"
+
+echo
+echo "outputs in $out/:"
+echo "  default.raw       the default dataset, 256^3 f32 voxels (x fastest, little-endian)"
+echo "  default.raw.json  its sidecar: dims, type, spacing, origin, value range, XXH3-64 checksum"

@@ -1,0 +1,72 @@
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "core/error.h"
+#include "core/units.h"
+#include "core/value_type.h"
+
+namespace brickyard {
+namespace {
+
+TEST(Error, WhatNamesFileKeyAndField) {
+  Error e(Errc::format, "expected 3 numbers");
+  EXPECT_STREQ(e.what(), "expected 3 numbers");
+  e.with_file("/data/vol.json").with_field("dims");
+  EXPECT_STREQ(e.what(), "/data/vol.json: field 'dims': expected 3 numbers");
+  e.with_key("L2 (1, 2, 3)");
+  EXPECT_STREQ(e.what(), "/data/vol.json: key L2 (1, 2, 3): field 'dims': expected 3 numbers");
+  EXPECT_EQ(e.code(), Errc::format);
+  EXPECT_EQ(e.message(), "expected 3 numbers");
+}
+
+TEST(Error, ExitCodesSeparateUsageFromFailure) {
+  EXPECT_EQ(exit_code(Errc::invalid_argument), 2);
+  EXPECT_EQ(exit_code(Errc::io), 1);
+  EXPECT_EQ(exit_code(Errc::corrupt), 1);
+}
+
+TEST(Error, CheckMacrosReportBothOperands) {
+  try {
+    const int a = 3, b = 4;
+    BY_CHECK_EQ(a, b);
+    FAIL() << "BY_CHECK_EQ did not throw";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::internal);
+    EXPECT_NE(std::string(e.what()).find("a == b with 3 vs 4"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(BY_CHECK_LT(1, 2));
+}
+
+TEST(ValueType, NamesSizesAndParsing) {
+  EXPECT_EQ(size_of(ValueType::u8), 1u);
+  EXPECT_EQ(size_of(ValueType::u16), 2u);
+  EXPECT_EQ(size_of(ValueType::f32), 4u);
+  for (auto t : {ValueType::u8, ValueType::u16, ValueType::f32}) EXPECT_EQ(parse_value_type(to_string(t)), t);
+  EXPECT_EQ(parse_value_type("float"), ValueType::f32);
+  EXPECT_FALSE(parse_value_type("f64").has_value());
+  try {
+    value_type_from_string("i32", "--type");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.field(), "--type");
+    EXPECT_NE(std::string(e.what()).find("u8, u16 or f32"), std::string::npos);
+  }
+  EXPECT_EQ(dispatch_value_type(ValueType::u16, [](auto tag) { return sizeof(tag); }), 2u);
+}
+
+TEST(Units, HumanReadableNumbers) {
+  EXPECT_EQ(format_count(999), "999");
+  EXPECT_EQ(format_count(1234567), "1.23M");
+  EXPECT_EQ(format_count(16777216), "16.8M");
+  EXPECT_EQ(format_bytes(512), "512 B");
+  EXPECT_EQ(format_bytes(1536), "1.5 KiB");
+  EXPECT_EQ(format_bytes(64.0 * 1024 * 1024), "64 MiB");
+  EXPECT_EQ(format_duration(0.0123), "12.3 ms");
+  EXPECT_EQ(format_duration(4.5), "4.50 s");
+  EXPECT_EQ(format_duration(187), "3:07");
+  EXPECT_EQ(format_duration(3723), "1:02:03");
+}
+
+}  // namespace
+}  // namespace brickyard

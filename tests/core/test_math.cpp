@@ -1,0 +1,76 @@
+#include <gtest/gtest.h>
+
+#include "core/math.h"
+
+namespace brickyard {
+namespace {
+
+TEST(Vec3, ArithmeticAndProducts) {
+  const Vec3d a{1, 2, 3}, b{4, -5, 6};
+  EXPECT_EQ(a + b, Vec3d(5, -3, 9));
+  EXPECT_EQ(a - b, Vec3d(-3, 7, -3));
+  EXPECT_EQ(a * 2.0, Vec3d(2, 4, 6));
+  EXPECT_EQ(2.0 * a, Vec3d(2, 4, 6));
+  EXPECT_EQ(a * b, Vec3d(4, -10, 18));
+  EXPECT_DOUBLE_EQ(dot(a, b), 4 - 10 + 18);
+  EXPECT_EQ(cross(Vec3d(1, 0, 0), Vec3d(0, 1, 0)), Vec3d(0, 0, 1));
+  EXPECT_DOUBLE_EQ(dot(cross(a, b), a), 0.0);
+  EXPECT_DOUBLE_EQ(length(Vec3d(3, 4, 12)), 13.0);
+  EXPECT_EQ(min(a, b), Vec3d(1, -5, 3));
+  EXPECT_EQ(max(a, b), Vec3d(4, 2, 6));
+  EXPECT_EQ(Vec3i(Vec3d(1.7, -2.2, 3.9)), Vec3i(1, -2, 3));
+  EXPECT_EQ(volume(Vec3s(2048, 2048, 2048)), int64_t(1) << 33);
+}
+
+TEST(Vec3, NormalizeKeepsZeroVectorFinite) {
+  EXPECT_EQ(normalize(Vec3f{}), Vec3f{});
+  const Vec3f n = normalize(Vec3f{0, 3, 4});
+  EXPECT_FLOAT_EQ(length(n), 1.0f);
+  EXPECT_FLOAT_EQ(n.z, 0.8f);
+}
+
+TEST(Vec3, MajorAxisPicksLargestMagnitude) {
+  EXPECT_EQ(major_axis(Vec3d(-5, 1, 2)), 0);
+  EXPECT_EQ(major_axis(Vec3d(0, -0.5, 0.1)), 1);
+  EXPECT_EQ(major_axis(Vec3d(0, 0, -1e-9)), 2);
+}
+
+TEST(Box3, DefaultIsEmptyAndExtendGrows) {
+  Box3d b;
+  EXPECT_TRUE(b.empty());
+  b.extend(Vec3d(1, 2, 3)).extend(Vec3d(-1, 5, 0));
+  EXPECT_FALSE(b.empty());
+  EXPECT_EQ(b.lo, Vec3d(-1, 2, 0));
+  EXPECT_EQ(b.hi, Vec3d(1, 5, 3));
+  EXPECT_EQ(b.center(), Vec3d(0, 3.5, 1.5));
+  EXPECT_TRUE(b.contains(Vec3d(1, 5, 3)));
+  EXPECT_FALSE(b.contains(Vec3d(1.0001, 5, 3)));
+  EXPECT_TRUE(b.overlaps(Box3d({1, 5, 3}, {2, 6, 4})));
+  EXPECT_TRUE(b.intersect(Box3d({2, 2, 2}, {3, 3, 3})).empty());
+}
+
+TEST(RayBox, HitsMissesAndInteriorOrigins) {
+  const Box3d box({0, 0, 0}, {1, 1, 1});
+  auto hit = intersect(Rayd({-1, 0.5, 0.5}, {1, 0, 0}), box);
+  EXPECT_DOUBLE_EQ(hit.t0, 1.0);
+  EXPECT_DOUBLE_EQ(hit.t1, 2.0);
+  EXPECT_TRUE(intersect(Rayd({-1, 2, 0.5}, {1, 0, 0}), box).empty());
+  auto inside = intersect(Rayd({0.5, 0.5, 0.5}, {0, 0, -1}), box);
+  EXPECT_DOUBLE_EQ(inside.t0, 0.0);
+  EXPECT_DOUBLE_EQ(inside.t1, 0.5);
+  EXPECT_TRUE(intersect(Rayd({-1, 0.5, 0.5}, {-1, 0, 0}), box).empty());  // pointing away
+}
+
+TEST(RayBox, AxisParallelRayOnAFacePlaneIsNotNaN) {
+  const Box3d box({0, 0, 0}, {1, 1, 1});
+  // Origin exactly on the y = 0 and z = 1 planes, travelling along x: 0 * inf terms appear.
+  auto hit = intersect(Rayd({-2, 0, 1}, {1, 0, 0}), box);
+  EXPECT_FALSE(hit.empty());
+  EXPECT_DOUBLE_EQ(hit.t0, 2.0);
+  EXPECT_DOUBLE_EQ(hit.t1, 3.0);
+  // Parallel and outside the slab: a miss.
+  EXPECT_TRUE(intersect(Rayd({-2, -0.1, 0.5}, {1, 0, 0}), box).empty());
+}
+
+}  // namespace
+}  // namespace brickyard

@@ -1,0 +1,117 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "core/error.h"
+#include "core/raw_volume.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+RawVolumeInfo sample_info() {
+  RawVolumeInfo info;
+  info.dims = {4, 5, 6};
+  info.type = ValueType::u16;
+  info.spacing = {0.5, 0.25, 2.0};
+  info.origin = {-1, 0, 1};
+  info.min_value = 3;
+  info.max_value = 65000;
+  info.quantization = {{-1.0, 2.0}};
+  info.source = "field test";
+  info.source_params = {{"seed", 7.0}};
+  info.bytes = 4 * 5 * 6 * 2;
+  info.xxh3_64 = 0x0123456789abcdefull;
+  return info;
+}
+
+TEST(RawSidecar, RoundTripsEveryField) {
+  testing::TempDir dir;
+  const std::string path = dir.file("v.raw.json");
+  const RawVolumeInfo info = sample_info();
+  write_raw_sidecar(path, info);
+  const RawVolumeInfo back = read_raw_sidecar(path);
+  EXPECT_EQ(back.dims, info.dims);
+  EXPECT_EQ(back.type, info.type);
+  EXPECT_TRUE(back.little_endian);
+  EXPECT_EQ(back.spacing, info.spacing);
+  EXPECT_EQ(back.origin, info.origin);
+  EXPECT_EQ(back.min_value, 3);
+  EXPECT_EQ(back.max_value, 65000);
+  EXPECT_EQ(back.quantization, info.quantization);
+  EXPECT_EQ(back.source, "field test");
+  EXPECT_EQ(back.source_params, info.source_params);
+  EXPECT_EQ(back.bytes, info.bytes);
+  EXPECT_EQ(back.xxh3_64, info.xxh3_64);
+  EXPECT_EQ(raw_sidecar_path("a/b.raw"), "a/b.raw.json");
+}
+
+// Writes the sample sidecar with one key replaced (or removed, when value is empty).
+std::string sidecar_with(const testing::TempDir& dir, const std::string& key, const std::string& value) {
+  const std::string path = dir.file("edit.json");
+  write_raw_sidecar(path, sample_info());
+  std::string text = testing::read_file(path);
+  const size_t at = text.find("\"" + key + "\"");
+  EXPECT_NE(at, std::string::npos);
+  size_t end = at;
+  int depth = 0;
+  for (; end < text.size(); ++end) {
+    const char c = text[end];
+    if (c == '[' || c == '{') ++depth;
+    if (c == ']' || c == '}') --depth;
+    if ((c == ',' && depth == 0) || depth < 0) break;
+  }
+  const std::string replacement = value.empty() ? "\"unused_key\": 0" : "\"" + key + "\": " + value;
+  text.replace(at, end - at, replacement);
+  std::ofstream(path) << text;
+  return path;
+}
+
+void expect_error_names(const std::string& path, const std::string& field, Errc code) {
+  try {
+    read_raw_sidecar(path);
+    FAIL() << "no error for field " << field;
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), code) << e.what();
+    EXPECT_EQ(e.file(), path);
+    EXPECT_EQ(e.field(), field) << e.what();
+  }
+}
+
+TEST(RawSidecar, BadContentNamesTheKey) {
+  testing::TempDir dir;
+  expect_error_names(sidecar_with(dir, "dims", ""), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "dims", "[4, 5]"), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "dims", "[4, 0, 6]"), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "dims", "\"big\""), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "type", "\"f64\""), "type", Errc::format);
+  expect_error_names(sidecar_with(dir, "endianness", "\"middle\""), "endianness", Errc::format);
+  expect_error_names(sidecar_with(dir, "bytes", "239"), "bytes", Errc::format);
+  expect_error_names(sidecar_with(dir, "brickyard_raw", "99"), "brickyard_raw", Errc::unsupported);
+  expect_error_names(sidecar_with(dir, "dims", "[4000000000, 4000000000, 4000000000]"), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "xxh3_64", "\"xyz\""), "xxh3_64", Errc::format);
+}
+
+TEST(RawSidecar, MalformedJsonIsAFormatError) {
+  testing::TempDir dir;
+  const std::string path = dir.file("bad.json");
+  std::ofstream(path) << "{ \"dims\": [1, 2, ";
+  try {
+    read_raw_sidecar(path);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::format);
+    EXPECT_EQ(e.file(), path);
+  }
+  EXPECT_THROW(read_raw_sidecar(dir.file("absent.json")), Error);
+}
+
+TEST(GridBytes, RejectsEmptyAndOverflowingGrids) {
+  EXPECT_EQ(checked_grid_bytes({256, 256, 256}, ValueType::f32), uint64_t(256) * 256 * 256 * 4);
+  EXPECT_FALSE(checked_grid_bytes({0, 256, 256}, ValueType::u8));
+  EXPECT_FALSE(checked_grid_bytes({1 << 22, 1 << 22, 1 << 22}, ValueType::f32));
+  EXPECT_FALSE(checked_grid_bytes({int64_t(1) << 40, int64_t(1) << 40, 1}, ValueType::u8));
+}
+
+}  // namespace
+}  // namespace brickyard
