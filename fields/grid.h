@@ -32,9 +32,9 @@ inline T quantize(double v, const ValueRange& r) {
     return static_cast<float>(v);
   } else {
     constexpr double top = std::is_same_v<T, uint8_t> ? 255.0 : 65535.0;
-    const double s = (v - r.lo) / (r.hi - r.lo) * top;
-    if (!(s > 0.0)) return T(0);  // also maps NaN to 0
-    if (s >= top) return static_cast<T>(top);
+    double s = (v - r.lo) / (r.hi - r.lo) * top;
+    s = s > 0.0 ? s : 0.0;  // also maps NaN to 0
+    s = s < top ? s : top;  // branch-free min/max, so row loops vectorise
     return static_cast<T>(s + 0.5);
   }
 }

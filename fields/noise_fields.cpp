@@ -43,11 +43,14 @@ class GradientNoise {
  private:
   static double fade(double t) { return t * t * t * (t * (t * 6 - 15) + 10); }
   static double lerp(double t, double a, double b) { return a + t * (b - a); }
+  // The 12 cube-edge gradients of improved noise, indexed by the low 4 hash bits (4 of them
+  // repeated). A table lookup instead of Perlin's bit tests: no unpredictable branches.
   static double grad(int hash, double x, double y, double z) {
-    const int h = hash & 15;
-    const double u = h < 8 ? x : y;
-    const double v = h < 4 ? y : (h == 12 || h == 14 ? x : z);
-    return ((h & 1) ? -u : u) + ((h & 2) ? -v : v);
+    static constexpr int8_t g[16][3] = {{1, 1, 0},  {-1, 1, 0}, {1, -1, 0}, {-1, -1, 0}, {1, 0, 1},  {-1, 0, 1},
+                                        {1, 0, -1}, {-1, 0, -1}, {0, 1, 1}, {0, -1, 1},  {0, 1, -1}, {0, -1, -1},
+                                        {1, 1, 0},  {1, -1, 0}, {-1, 1, 0}, {0, -1, -1}};
+    const int8_t* v = g[hash & 15];
+    return v[0] * x + v[1] * y + v[2] * z;
   }
 
   std::array<int, 512> perm_{};
