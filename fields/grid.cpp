@@ -12,10 +12,9 @@
 #include <vector>
 
 #include <fmt/format.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "core/progress.h"
 
 namespace brickyard {
@@ -51,9 +50,9 @@ void sample_rows(const GridSampler& s, int64_t z0, int64_t z1, T* out) {
   const Vec3s dims = s.dims();
   const ValueRange q = s.quantization();
   const int64_t rows = (z1 - z0) * dims.y;
-  tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows, 4), [&](const tbb::blocked_range<int64_t>& r) {
+  parallel_for<int64_t>(0, rows, 4, [&](int64_t row_begin, int64_t row_end) {
     std::vector<double> row(size_t(dims.x));
-    for (int64_t i = r.begin(); i < r.end(); ++i) {
+    for (int64_t i = row_begin; i < row_end; ++i) {
       const int64_t z = z0 + i / dims.y, y = i % dims.y;
       s.field().sample_row(s.position(0, y, z), s.spacing().x, dims.x, row.data());
       T* dst = out + i * dims.x;
