@@ -70,14 +70,17 @@ void Progress::report(bool final_line) {
 
   const bool known = total_ > 0;
   const double fraction = known ? std::min(1.0, done / static_cast<double>(total_)) : 0.0;
-  const std::string eta = (known && rate > 0) ? format_duration((static_cast<double>(total_) - done) / rate) : "?";
+  std::string eta = "?";
+  if (known && rate > 0) {
+    const double remaining = (static_cast<double>(total_) - done) / rate;
+    eta = remaining < 1.0 ? "<1 s" : format_duration(std::round(remaining));
+  }
   if (style_ == ProgressStyle::bar) {
     constexpr int width = 30;
     std::string bar;
     if (known) {
       const int filled = static_cast<int>(fraction * width);
-      bar = "[" + std::string(size_t(filled), '=') + (filled < width ? ">" : "") +
-            std::string(size_t(std::max(0, width - filled - 1)), ' ') + "] ";
+      bar = fmt::format("[{:=<{}}{:<{}}] ", "", filled, filled < width ? ">" : "", width - filled);
     }
     *out_ << "\r\033[K"
           << fmt::format("{} {}{:3.0f}%  {}  {}  ETA {}", label_, bar, fraction * 100, amount(done), rate_text, eta)

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <future>
 #include <limits>
 #include <memory>
 #include <vector>
@@ -74,17 +75,29 @@ void GridSampler::sample_slab(int64_t z0, int64_t z1, std::span<std::byte> out) 
 void stream_grid(const GridSampler& sampler, int64_t slab_slices,
                  const std::function<void(int64_t, int64_t, std::span<const std::byte>)>& sink, Progress* progress) {
   const size_t slice = sampler.slice_bytes();
-  if (slab_slices <= 0) slab_slices = std::max<int64_t>(1, int64_t((32u << 20) / slice));
+  // At most 8 MiB and at least 32 slabs per grid: enough rows for every core, bounded memory,
+  // and progress that moves.
+  if (slab_slices <= 0)
+    slab_slices = std::max<int64_t>(1, std::min(int64_t((8u << 20) / slice), sampler.dims().z / 32));
   slab_slices = std::min(slab_slices, sampler.dims().z);
-  std::vector<std::byte> slab(size_t(slab_slices) * slice);
   const int64_t voxels_per_slice = sampler.dims().x * sampler.dims().y;
-  for (int64_t z0 = 0; z0 < sampler.dims().z; z0 += slab_slices) {
+  // Double buffering: the sink consumes one slab (writing, hashing) on its own thread while
+  // the next slab is sampled.
+  std::vector<std::byte> buffers[2];
+  for (auto& b : buffers) b.resize(size_t(slab_slices) * slice);
+  std::future<void> pending;
+  int current = 0;
+  for (int64_t z0 = 0; z0 < sampler.dims().z; z0 += slab_slices, current ^= 1) {
     const int64_t z1 = std::min(z0 + slab_slices, sampler.dims().z);
-    std::span<std::byte> bytes(slab.data(), size_t(z1 - z0) * slice);
+    std::span<std::byte> bytes(buffers[current].data(), size_t(z1 - z0) * slice);
     sampler.sample_slab(z0, z1, bytes);
-    sink(z0, z1, bytes);
-    if (progress) progress->advance(uint64_t((z1 - z0) * voxels_per_slice));
+    if (pending.valid()) pending.get();  // rethrows the sink's error, if any
+    pending = std::async(std::launch::async, [&sink, &progress, z0, z1, bytes, voxels_per_slice] {
+      sink(z0, z1, bytes);
+      if (progress) progress->advance(uint64_t((z1 - z0) * voxels_per_slice));
+    });
   }
+  if (pending.valid()) pending.get();
 }
 
 namespace {
