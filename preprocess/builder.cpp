@@ -1,0 +1,601 @@
+#include "preprocess/builder.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <deque>
+#include <limits>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <tbb/enumerable_thread_specific.h>
+
+#include "core/error.h"
+#include "core/parallel.h"
+#include "core/progress.h"
+#include "core/timing.h"
+#include "preprocess/volume_source.h"
+#include "storage/brick_store.h"
+
+namespace brickyard {
+
+std::string_view to_string(Downsample d) {
+  switch (d) {
+    case Downsample::average: return "average";
+    case Downsample::min: return "min";
+    case Downsample::max: return "max";
+  }
+  return "?";
+}
+
+std::string_view to_string(NonFinite n) {
+  switch (n) {
+    case NonFinite::reject: return "reject";
+    case NonFinite::zero: return "zero";
+    case NonFinite::clamp: return "clamp";
+  }
+  return "?";
+}
+
+Downsample parse_downsample(std::string_view s) {
+  if (s == "average") return Downsample::average;
+  if (s == "min") return Downsample::min;
+  if (s == "max") return Downsample::max;
+  throw Error(Errc::invalid_argument, fmt::format("unknown filter '{}' (expected average, min or max)", s))
+      .with_field("--downsample");
+}
+
+NonFinite parse_nonfinite(std::string_view s) {
+  if (s == "reject") return NonFinite::reject;
+  if (s == "zero") return NonFinite::zero;
+  if (s == "clamp") return NonFinite::clamp;
+  throw Error(Errc::invalid_argument, fmt::format("unknown repair '{}' (expected reject, zero or clamp)", s))
+      .with_field("--nonfinite");
+}
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Writer thread: takes encoded records off the compute threads and commits them in batches.
+// Guarded by mutex_: queue_, queued_bytes_, closing_, error_. The StoreWriter is used by the
+// writer thread only (until close() has joined it).
+class RecordWriter {
+ public:
+  RecordWriter(StoreWriter& store, size_t max_queued_bytes) : store_(store), max_bytes_(max_queued_bytes) {
+    thread_ = std::thread([this] { run(); });
+  }
+  ~RecordWriter() {
+    {
+      std::lock_guard lock(mutex_);
+      closing_ = true;
+      abandon_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+
+  void push(const BrickKey& key, std::vector<std::byte>&& record) {
+    std::unique_lock lock(mutex_);
+    space_.wait(lock, [&] { return queued_bytes_ < max_bytes_ || error_; });
+    if (error_) std::rethrow_exception(error_);
+    queued_bytes_ += record.size();
+    queue_.push_back({key, std::move(record)});
+    cv_.notify_one();
+  }
+
+  /// Waits until every record is handed to the store; rethrows the writer's error.
+  void close() {
+    {
+      std::lock_guard lock(mutex_);
+      closing_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  struct Item {
+    BrickKey key;
+    std::vector<std::byte> record;
+  };
+
+  void run() {
+    try {
+      while (true) {
+        Item item;
+        {
+          std::unique_lock lock(mutex_);
+          cv_.wait(lock, [&] { return !queue_.empty() || closing_; });
+          if (abandon_ || (queue_.empty() && closing_)) return;
+          item = std::move(queue_.front());
+          queue_.pop_front();
+          queued_bytes_ -= item.record.size();
+        }
+        space_.notify_one();
+        store_.put_brick(item.key, std::move(item.record));
+      }
+    } catch (...) {
+      std::lock_guard lock(mutex_);
+      error_ = std::current_exception();
+      space_.notify_all();
+    }
+  }
+
+  StoreWriter& store_;
+  size_t max_bytes_;
+  std::mutex mutex_;
+  std::condition_variable cv_, space_;
+  std::deque<Item> queue_;
+  size_t queued_bytes_ = 0;
+  bool closing_ = false, abandon_ = false;
+  std::exception_ptr error_;
+  std::thread thread_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Per-build state shared by the levels.
+struct BuildContext {
+  BrickFormat format;
+  StoreLayout layout;
+  NodeTable nodes;
+  Downsample downsample = Downsample::average;
+  double tolerance = 0;
+  double background = 0;
+  RecordWriter* writer = nullptr;
+  // Finest-level histogram: exact per integer value for u8/u16, 256 bins over `hist_range` for f32.
+  ValueRange hist_range;
+  size_t hist_bins = 256;
+  tbb::enumerable_thread_specific<std::vector<uint64_t>> histograms;
+  struct AtomicStats {
+    std::atomic<int64_t> constant{0}, empty{0};
+    std::atomic<uint64_t> raw_bytes{0}, stored_bytes{0};
+  };
+  std::vector<AtomicStats> stats;
+
+  explicit BuildContext(size_t levels) : stats(levels) {}
+};
+
+template <typename T>
+T round_to(double v) {
+  if constexpr (std::is_same_v<T, float>) return static_cast<float>(v);
+  else return static_cast<T>(std::clamp(std::lround(v), 0L, long(std::numeric_limits<T>::max())));
+}
+
+// One level of the pyramid: a ring of slices, row-by-row brick output, and the 2x filter that
+// feeds the next coarser level.
+template <typename T>
+class Level {
+ public:
+  Level(BuildContext& ctx, int level, Level* coarser)
+      : ctx_(ctx), level_(level), coarser_(coarser), dims_(ctx.layout.level_dims(level)),
+        bricks_(ctx.layout.level_bricks(level)), M_(ctx.format.brick_size), A_(ctx.format.apron),
+        forward_(std::max(A_, 1)), capacity_(M_ + A_ + forward_) {
+    ring_.resize(size_t(capacity_));
+    for (auto& s : ring_) s.resize(size_t(dims_.x * dims_.y));
+  }
+
+  int64_t slice_voxels() const { return dims_.x * dims_.y; }
+  /// The slot the next slice must be written into.
+  T* next_slot() { return ring_[size_t(received_ % capacity_)].data(); }
+
+  /// The slice in next_slot() is complete.
+  void commit() {
+    const int64_t z = received_++;
+    if (coarser_ && (z & 1)) downsample(slice(z - 1), slice(z));
+    while (next_row_ < bricks_.z && row_ready(next_row_)) process_row(next_row_++);
+  }
+
+  /// End of input: flushes the last odd slice and the remaining rows, then the coarser levels.
+  void finish() {
+    BY_CHECK_EQ(received_, dims_.z);
+    if (coarser_ && (dims_.z & 1)) downsample(slice(dims_.z - 1), slice(dims_.z - 1));
+    while (next_row_ < bricks_.z) process_row(next_row_++);
+    if (coarser_) coarser_->finish();
+  }
+
+ private:
+  const T* slice(int64_t z) const {
+    z = std::clamp<int64_t>(z, 0, dims_.z - 1);
+    return ring_[size_t(z % capacity_)].data();
+  }
+
+  bool row_ready(int64_t r) const { return received_ >= std::min<int64_t>((r + 1) * M_ + forward_, dims_.z); }
+
+  void downsample(const T* s0, const T* s1) {
+    T* out = coarser_->next_slot();
+    const Vec3s cd = coarser_->dims_;
+    const int64_t dx = dims_.x, dy = dims_.y;
+    const Downsample mode = ctx_.downsample;
+    parallel_for<int64_t>(0, cd.y, 8, [&](int64_t j0, int64_t j1) {
+      for (int64_t j = j0; j < j1; ++j) {
+        const int64_t y0 = 2 * j, y1 = std::min(2 * j + 1, dy - 1);
+        T* dst = out + j * cd.x;
+        for (int64_t i = 0; i < cd.x; ++i) {
+          const int64_t x0 = 2 * i, x1 = std::min(2 * i + 1, dx - 1);
+          const T v[8] = {s0[y0 * dx + x0], s0[y0 * dx + x1], s0[y1 * dx + x0], s0[y1 * dx + x1],
+                          s1[y0 * dx + x0], s1[y0 * dx + x1], s1[y1 * dx + x0], s1[y1 * dx + x1]};
+          if (mode == Downsample::min) {
+            dst[i] = *std::min_element(v, v + 8);
+          } else if (mode == Downsample::max) {
+            dst[i] = *std::max_element(v, v + 8);
+          } else if constexpr (std::is_same_v<T, float>) {
+            dst[i] = ((v[0] + v[1]) + (v[2] + v[3]) + (v[4] + v[5]) + (v[6] + v[7])) * 0.125f;
+          } else {
+            uint32_t sum = 4;  // round half up
+            for (T x : v) sum += x;
+            dst[i] = static_cast<T>(sum >> 3);
+          }
+        }
+      }
+    });
+    coarser_->commit();
+  }
+
+  void process_row(int64_t r) {
+    const int64_t n = bricks_.x * bricks_.y;
+    std::vector<std::vector<std::byte>> records(static_cast<size_t>(n));
+    parallel_for<int64_t>(0, n, 1, [&](int64_t b0, int64_t b1) {
+      for (int64_t b = b0; b < b1; ++b) records[size_t(b)] = process_brick(b % bricks_.x, b / bricks_.x, r);
+    });
+    for (int64_t b = 0; b < n; ++b)
+      if (!records[size_t(b)].empty())
+        ctx_.writer->push({uint32_t(level_), uint32_t(b % bricks_.x), uint32_t(b / bricks_.x), uint32_t(r)},
+                          std::move(records[size_t(b)]));
+  }
+
+  std::vector<std::byte> process_brick(int64_t bx, int64_t by, int64_t bz) {
+    const int G = M_ + A_ + forward_;  // gathered edge: payload plus the forward neighbours
+    const int E = M_ + 2 * A_;         // payload edge
+    thread_local std::vector<T> gathered, payload_buffer;
+    gathered.resize(size_t(G) * G * G);
+    const int64_t x0 = bx * M_ - A_, y0 = by * M_ - A_, z0 = bz * M_ - A_;
+
+    // Step 1: gather with replicated borders.
+    const int lx_lo = int(std::clamp<int64_t>(-x0, 0, G));
+    const int lx_hi = int(std::clamp<int64_t>(dims_.x - x0, lx_lo, G));
+    for (int lz = 0; lz < G; ++lz) {
+      const T* s = slice(z0 + lz);
+      for (int ly = 0; ly < G; ++ly) {
+        const T* row = s + std::clamp<int64_t>(y0 + ly, 0, dims_.y - 1) * dims_.x;
+        T* dst = gathered.data() + (size_t(lz) * G + ly) * G;
+        for (int lx = 0; lx < lx_lo; ++lx) dst[lx] = row[0];
+        if (lx_hi > lx_lo) std::memcpy(dst + lx_lo, row + x0 + lx_lo, size_t(lx_hi - lx_lo) * sizeof(T));
+        for (int lx = lx_hi; lx < G; ++lx) dst[lx] = row[dims_.x - 1];
+      }
+    }
+    const T* payload = gathered.data();
+    if (G != E) {  // no apron: the payload is the leading E^3 corner of the gather
+      payload_buffer.resize(size_t(E) * E * E);
+      for (int lz = 0; lz < E; ++lz)
+        for (int ly = 0; ly < E; ++ly)
+          std::memcpy(payload_buffer.data() + (size_t(lz) * E + ly) * E, gathered.data() + (size_t(lz) * G + ly) * G,
+                      size_t(E) * sizeof(T));
+      payload = payload_buffer.data();
+    }
+
+    // Step 2: value ranges, of the payload (record header) and of the node's trilinear cells.
+    const size_t voxels = size_t(E) * E * E;
+    T pmin = payload[0], pmax = payload[0];
+    for (size_t i = 1; i < voxels; ++i) {
+      pmin = std::min(pmin, payload[i]);
+      pmax = std::max(pmax, payload[i]);
+    }
+    const int nx = int(std::min<int64_t>(M_, dims_.x - 1 - bx * M_)), ny = int(std::min<int64_t>(M_, dims_.y - 1 - by * M_)),
+              nz = int(std::min<int64_t>(M_, dims_.z - 1 - bz * M_));
+    T nmin = std::numeric_limits<T>::max(), nmax = std::numeric_limits<T>::lowest();
+    for (int lz = A_; lz <= A_ + nz; ++lz)
+      for (int ly = A_; ly <= A_ + ny; ++ly) {
+        const T* row = gathered.data() + (size_t(lz) * G + ly) * G;
+        for (int lx = A_; lx <= A_ + nx; ++lx) {
+          nmin = std::min(nmin, row[lx]);
+          nmax = std::max(nmax, row[lx]);
+        }
+      }
+
+    // Step 3: the finest level's histogram, each voxel counted once (interiors only).
+    if (level_ == ctx_.layout.finest()) count_histogram(gathered.data(), G, bx, by, bz);
+
+    // Step 4: node record, and the payload unless the brick is constant.
+    const BrickKey key{uint32_t(level_), uint32_t(bx), uint32_t(by), uint32_t(bz)};
+    NodeRecord& node = ctx_.nodes.at(key);
+    node.min = float(nmin);
+    node.max = float(nmax);
+    node.flags = level_ == ctx_.layout.finest() ? kNodeFinest : kNodeHasChildren;
+    auto& stats = ctx_.stats[size_t(level_)];
+    if (double(pmax) - double(pmin) <= ctx_.tolerance) {
+      const T value = ctx_.tolerance == 0 ? pmin : round_to<T>((double(pmin) + double(pmax)) / 2);
+      node.constant = float(value);
+      node.flags |= kNodeConstant;
+      stats.constant.fetch_add(1, std::memory_order_relaxed);
+      if (std::abs(double(value) - ctx_.background) <= ctx_.tolerance) {
+        node.flags |= kNodeEmpty;
+        stats.empty.fetch_add(1, std::memory_order_relaxed);
+      }
+      return {};
+    }
+    auto record = encode_brick(ctx_.format, key,
+                               {reinterpret_cast<const std::byte*>(payload), voxels * sizeof(T)}, float(pmin), float(pmax));
+    stats.raw_bytes.fetch_add(voxels * sizeof(T), std::memory_order_relaxed);
+    stats.stored_bytes.fetch_add(record.size(), std::memory_order_relaxed);
+    return record;
+  }
+
+  void count_histogram(const T* gathered, int G, int64_t bx, int64_t by, int64_t bz) {
+    // Interior voxels of this brick: [b*M, min((b+1)*M, dims)) along each axis.
+    const int ex = int(std::min<int64_t>(M_, dims_.x - bx * M_)), ey = int(std::min<int64_t>(M_, dims_.y - by * M_)),
+              ez = int(std::min<int64_t>(M_, dims_.z - bz * M_));
+    auto& h = ctx_.histograms.local();
+    if (h.empty()) h.assign(ctx_.hist_bins, 0);
+    const double lo = ctx_.hist_range.lo, scale = double(ctx_.hist_bins) / std::max(1e-300, ctx_.hist_range.hi - lo);
+    for (int lz = A_; lz < A_ + ez; ++lz)
+      for (int ly = A_; ly < A_ + ey; ++ly) {
+        const T* row = gathered + (size_t(lz) * G + ly) * G;
+        for (int lx = A_; lx < A_ + ex; ++lx) {
+          if constexpr (std::is_same_v<T, float>) {
+            const double b = (double(row[lx]) - lo) * scale;
+            h[size_t(std::clamp(b, 0.0, double(ctx_.hist_bins - 1)))]++;
+          } else {
+            h[row[lx]]++;
+          }
+        }
+      }
+  }
+
+  BuildContext& ctx_;
+  int level_;
+  Level* coarser_;
+  Vec3s dims_, bricks_;
+  int M_, A_, forward_, capacity_;
+  std::vector<std::vector<T>> ring_;
+  int64_t received_ = 0;
+  int64_t next_row_ = 0;
+};
+
+// ---------------------------------------------------------------------------------------------
+
+struct ScanResult {
+  uint64_t nonfinite = 0;
+  Vec3s first{-1};
+  double min = std::numeric_limits<double>::infinity(), max = -std::numeric_limits<double>::infinity();
+};
+
+// The f32 pre-pass: finds non-finite voxels before anything is written, and the finite range.
+ScanResult scan_source(VolumeSource& source, Progress* progress) {
+  const Vec3s d = source.dims();
+  const int64_t slab = std::max<int64_t>(1, std::min<int64_t>(d.z, (8 << 20) / (d.x * d.y * 4)));
+  std::vector<float> buffer(size_t(slab * d.x * d.y));
+  ScanResult result;
+  for (int64_t z0 = 0; z0 < d.z; z0 += slab) {
+    const int64_t z1 = std::min(d.z, z0 + slab);
+    const size_t n = size_t((z1 - z0) * d.x * d.y);
+    source.read_slab(z0, z1, {reinterpret_cast<std::byte*>(buffer.data()), n * 4});
+    for (size_t i = 0; i < n; ++i) {
+      const float v = buffer[i];
+      if (!std::isfinite(v)) {
+        if (result.nonfinite++ == 0) {
+          const int64_t idx = int64_t(i);
+          result.first = {idx % d.x, (idx / d.x) % d.y, z0 + idx / (d.x * d.y)};
+        }
+        continue;
+      }
+      result.min = std::min(result.min, double(v));
+      result.max = std::max(result.max, double(v));
+    }
+    if (progress) progress->advance(uint64_t(n));
+  }
+  source.rewind();
+  return result;
+}
+
+template <typename T>
+void repair_slice(T* data, int64_t n, const BuildOptions& o, const ScanResult& scan) {
+  if constexpr (std::is_same_v<T, float>) {
+    if (o.nonfinite != NonFinite::reject && scan.nonfinite > 0) {
+      for (int64_t i = 0; i < n; ++i) {
+        float& v = data[i];
+        if (std::isfinite(v)) continue;
+        if (o.nonfinite == NonFinite::zero || std::isnan(v)) v = o.nonfinite == NonFinite::zero ? 0.0f : float(std::clamp(0.0, scan.min, scan.max));
+        else v = v > 0 ? float(scan.max) : float(scan.min);
+      }
+    }
+  }
+  if (o.clamp) {
+    const T lo = round_to<T>(o.clamp->first), hi = round_to<T>(o.clamp->second);
+    for (int64_t i = 0; i < n; ++i) data[i] = std::clamp(data[i], lo, hi);
+  }
+}
+
+std::string build_params_json(const BuildOptions& o, double background) {
+  nlohmann::json j = {{"brick_size", o.brick_size},
+                      {"apron", o.apron},
+                      {"codec", std::string(to_string(o.codec))},
+                      {"hc_level", o.hc_level},
+                      {"shuffle", o.shuffle},
+                      {"downsample", std::string(to_string(o.downsample))},
+                      {"constant_tolerance", o.constant_tolerance},
+                      {"nonfinite", std::string(to_string(o.nonfinite))},
+                      {"background", background}};
+  j["clamp"] = o.clamp ? nlohmann::json{o.clamp->first, o.clamp->second} : nlohmann::json(nullptr);
+  return j.dump();
+}
+
+template <typename T>
+void run_levels(VolumeSource& source, BuildContext& ctx, const BuildOptions& options, const ScanResult& scan,
+                Progress* progress) {
+  // Coarsest first in memory so each level can point at its coarser neighbour.
+  std::vector<std::unique_ptr<Level<T>>> levels(size_t(ctx.layout.levels));
+  for (int l = 0; l < ctx.layout.levels; ++l)
+    levels[size_t(l)] = std::make_unique<Level<T>>(ctx, l, l > 0 ? levels[size_t(l - 1)].get() : nullptr);
+  Level<T>& finest = *levels.back();
+  const Vec3s d = ctx.layout.dims;
+  const size_t slice_bytes = size_t(finest.slice_voxels()) * sizeof(T);
+  for (int64_t z = 0; z < d.z; ++z) {
+    T* slot = finest.next_slot();
+    source.read_slab(z, z + 1, {reinterpret_cast<std::byte*>(slot), slice_bytes});
+    repair_slice(slot, finest.slice_voxels(), options, scan);
+    finest.commit();
+    if (progress) progress->advance(uint64_t(finest.slice_voxels()));
+  }
+  finest.finish();
+}
+
+void validate(const BuildOptions& o) {
+  if (o.apron < 0 || o.apron > 4)
+    throw Error(Errc::invalid_argument, fmt::format("apron {} is outside [0, 4]", o.apron)).with_field("--apron");
+  if (o.hc_level < 1 || o.hc_level > 12)
+    throw Error(Errc::invalid_argument, fmt::format("LZ4-HC level {} is outside [1, 12]", o.hc_level)).with_field("--hc-level");
+  if (!(o.constant_tolerance >= 0))
+    throw Error(Errc::invalid_argument, "the constant tolerance must be at least 0").with_field("--constant-tolerance");
+  if (o.clamp && !(o.clamp->first <= o.clamp->second))
+    throw Error(Errc::invalid_argument, fmt::format("range [{}, {}] is empty", o.clamp->first, o.clamp->second))
+        .with_field("--range");
+}
+
+}  // namespace
+
+BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options, Progress* progress) {
+  validate(options);
+  Stopwatch watch;
+  BuildResult result;
+  const StoreLayout layout = StoreLayout::make(source.dims(), options.brick_size);
+  const std::string source_json = source.describe_json();
+  const std::string build_json = build_params_json(options, source.background());
+
+  // Decide what to do with whatever is at `dir`.
+  switch (probe_store(dir)) {
+    case StoreState::absent: break;
+    case StoreState::not_a_store:
+      throw Error(Errc::invalid_argument, "exists and is not a brickyard store; refusing to overwrite it").with_file(dir);
+    case StoreState::incomplete:
+      result.rebuilt_incomplete = true;
+      remove_store_files(dir);
+      break;
+    case StoreState::complete: {
+      const Manifest old = read_manifest(dir);
+      if (old.source == nlohmann::json::parse(source_json).dump() && old.build == build_json && !options.force) {
+        result.manifest = old;
+        result.up_to_date = true;
+        return result;
+      }
+      if (!options.force)
+        throw Error(Errc::invalid_argument,
+                    "a complete store from a different source or with different parameters is there; "
+                    "pass --force to rebuild it")
+            .with_file(dir);
+      remove_store_files(dir);
+      break;
+    }
+  }
+
+  BrickFormat format;
+  format.type = source.type();
+  format.brick_size = options.brick_size;
+  format.apron = options.apron;
+  format.codec = options.codec;
+  format.hc_level = options.hc_level;
+  format.shuffle = options.shuffle;
+
+  // The f32 pre-pass, before anything is written: non-finite voxels and the value range.
+  ScanResult scan;
+  std::optional<ValueRange> range = source.value_range_hint();
+  if (source.may_contain_nonfinite() || (source.type() == ValueType::f32 && !range)) {
+    std::unique_ptr<Progress> scan_progress;
+    if (progress) scan_progress = std::make_unique<Progress>("scan", uint64_t(volume(source.dims())), "voxels");
+    scan = scan_source(source, scan_progress.get());
+    if (scan.nonfinite > 0 && options.nonfinite == NonFinite::reject)
+      throw Error(Errc::format, fmt::format("{} non-finite voxels (NaN or infinity), the first at ({}, {}, {}); "
+                                            "repair them with --nonfinite=zero or --nonfinite=clamp",
+                                            scan.nonfinite, scan.first.x, scan.first.y, scan.first.z))
+          .with_file(source.name());
+    if (!(scan.min <= scan.max)) scan.min = scan.max = 0;  // nothing finite at all
+    range = ValueRange{scan.min, scan.max};
+  }
+
+  Manifest manifest;
+  manifest.dims = layout.dims;
+  manifest.spacing = source.spacing();
+  manifest.origin = source.origin();
+  manifest.format = format;
+  manifest.levels = layout.levels;
+  manifest.background = source.background();
+  manifest.source = nlohmann::json::parse(source_json).dump();
+  manifest.build = build_json;
+
+  BuildContext ctx(size_t(layout.levels));
+  ctx.format = format;
+  ctx.layout = layout;
+  ctx.nodes = NodeTable(layout);
+  ctx.downsample = options.downsample;
+  ctx.tolerance = options.constant_tolerance;
+  ctx.background = source.background();
+  if (format.type == ValueType::f32) {
+    ValueRange r = range.value_or(ValueRange{0, 1});
+    if (options.clamp) r = {std::max(r.lo, options.clamp->first), std::min(r.hi, options.clamp->second)};
+    ctx.hist_range = r;
+    ctx.hist_bins = 256;
+  } else {
+    ctx.hist_range = {0, integer_max(format.type)};
+    ctx.hist_bins = size_t(integer_max(format.type)) + 1;
+  }
+
+  lmdb::EnvOptions env;
+  const uint64_t raw_bytes = uint64_t(volume(layout.dims)) * size_of(format.type);
+  env.map_size = options.map_size ? options.map_size : std::max<uint64_t>(uint64_t(64) << 20, raw_bytes + raw_bytes / 2);
+  env.growth = options.map_growth;
+  env.max_map_size = options.map_growth ? uint64_t(1) << 44 : env.map_size;
+  env.no_sync = true;  // the final transaction syncs everything before it
+  StoreWriter store(dir, manifest, env, options.batch_bytes);
+  {
+    RecordWriter writer(store, size_t(64) << 20);
+    ctx.writer = &writer;
+    dispatch_value_type(format.type, [&](auto tag) { run_levels<decltype(tag)>(source, ctx, options, scan, progress); });
+    writer.close();
+  }
+
+  // Manifest: value range from the finest node ranges (they cover every voxel), histogram,
+  // per-level statistics.
+  const auto& finest = ctx.nodes.level(layout.finest());
+  manifest.min_value = std::numeric_limits<double>::infinity();
+  manifest.max_value = -std::numeric_limits<double>::infinity();
+  for (const NodeRecord& n : finest) {
+    manifest.min_value = std::min(manifest.min_value, double(n.min));
+    manifest.max_value = std::max(manifest.max_value, double(n.max));
+  }
+  std::vector<uint64_t> fine(ctx.hist_bins, 0);
+  for (const auto& h : ctx.histograms)
+    for (size_t i = 0; i < h.size(); ++i) fine[i] += h[i];
+  manifest.histogram.counts.assign(256, 0);
+  if (format.type == ValueType::f32) {
+    manifest.histogram.lo = ctx.hist_range.lo;
+    manifest.histogram.hi = ctx.hist_range.hi;
+    manifest.histogram.counts = fine;
+  } else {
+    // Exact integer counts, rebinned onto 256 bins over the values that occur.
+    manifest.histogram.lo = manifest.min_value;
+    manifest.histogram.hi = manifest.max_value;
+    const double span = std::max(1.0, manifest.max_value - manifest.min_value + 1);
+    for (size_t v = 0; v < fine.size(); ++v)
+      if (fine[v])
+        manifest.histogram.counts[size_t(std::min(255.0, (double(v) - manifest.min_value) / span * 256))] += fine[v];
+  }
+  for (int l = 0; l < layout.levels; ++l) {
+    const auto& s = ctx.stats[size_t(l)];
+    manifest.stats.push_back({layout.brick_count(l), s.constant.load(), s.empty.load(), s.raw_bytes.load(),
+                              s.stored_bytes.load()});
+    result.stored_bytes += s.stored_bytes.load();
+  }
+  store.finish(manifest, ctx.nodes);
+  manifest.complete = true;
+  result.manifest = manifest;
+  result.seconds = watch.seconds();
+  result.input_bytes = source.input_bytes();
+  return result;
+}
+
+}  // namespace brickyard

@@ -1,0 +1,69 @@
+#pragma once
+/// @file builder.h
+/// @brief The streaming, parallel multiresolution build: a VolumeSource in, a complete brick
+/// store out.
+///
+/// One pass over the source, in z order. Each level keeps a ring of M + A + max(A, 1) slices
+/// (one brick row with its aprons and forward neighbours) and feeds every pair of its slices,
+/// 2x filtered, to the next coarser level, so all levels are built at once and memory is a
+/// few brick slabs per level whatever the volume size. Bricks of a row are cut, summarised
+/// and compressed in parallel (TBB); a writer thread commits them to LMDB in batches. The
+/// store claims to be complete only in its very last transaction.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "storage/brick_codec.h"
+#include "storage/lmdb_env.h"
+#include "storage/manifest.h"
+
+namespace brickyard {
+
+class Progress;
+class VolumeSource;
+
+enum class Downsample { average, min, max };
+enum class NonFinite { reject, zero, clamp };
+std::string_view to_string(Downsample d);
+std::string_view to_string(NonFinite n);
+Downsample parse_downsample(std::string_view s);
+NonFinite parse_nonfinite(std::string_view s);
+
+struct BuildOptions {
+  int brick_size = 32;
+  int apron = 1;
+  Codec codec = Codec::lz4;
+  int hc_level = 9;
+  bool shuffle = true;
+  Downsample downsample = Downsample::average;
+  /// A brick is constant (stored without payload) when max - min over its voxels, apron
+  /// included, is at most this.
+  double constant_tolerance = 0.0;
+  /// Clamp every source value into [lo, hi] (stored units).
+  std::optional<std::pair<double, double>> clamp;
+  NonFinite nonfinite = NonFinite::reject;
+  uint64_t map_size = 0;          ///< initial LMDB map size; 0 picks one from the input size
+  bool map_growth = true;
+  uint64_t batch_bytes = uint64_t(32) << 20;
+  /// Rebuild a complete store whose source or parameters differ (an incomplete one is always
+  /// rebuilt; a complete, identical one is left alone).
+  bool force = false;
+};
+
+struct BuildResult {
+  Manifest manifest;
+  bool up_to_date = false;  ///< nothing was done: the store was complete and identical
+  bool rebuilt_incomplete = false;
+  double seconds = 0;
+  uint64_t input_bytes = 0;
+  uint64_t stored_bytes = 0;
+};
+
+/// @brief Builds (or rebuilds) the store in `dir` from `source`.
+/// @throws Error naming the source or the store; a failed build leaves an incomplete store.
+BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options,
+                        Progress* progress = nullptr);
+
+}  // namespace brickyard

@@ -1,0 +1,151 @@
+// Raw volumes (memory-mapped) and procedural fields as builder sources.
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/raw_volume.h"
+#include "fields/grid.h"
+#include "preprocess/volume_source.h"
+
+namespace brickyard {
+namespace {
+
+class RawSource final : public VolumeSource {
+ public:
+  RawSource(const std::string& path, const RawFileSpec& spec) : path_(path), spec_(spec) {
+    const auto needed = checked_grid_bytes(spec.dims, spec.type);
+    if (!needed)
+      throw Error(Errc::invalid_argument, fmt::format("dims {}x{}x{} are empty or overflow a 64-bit byte count",
+                                                      spec.dims.x, spec.dims.y, spec.dims.z))
+          .with_file(path)
+          .with_field("dims");
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0) {
+      const int err = errno;
+      ::close(fd_);
+      throw Error(Errc::io, fmt::format("cannot stat: {}", std::strerror(err))).with_file(path);
+    }
+    size_ = uint64_t(st.st_size);
+    mtime_ns_ = int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec;
+    const uint64_t expected = spec.header_bytes + *needed;
+    if (size_ != expected) {
+      ::close(fd_);
+      const std::string what = size_ < expected ? "truncated" : "larger than its dims say";
+      throw Error(Errc::format, fmt::format("file is {}: {} bytes, but {}x{}x{} {}{} needs {}", what, size_,
+                                            spec.dims.x, spec.dims.y, spec.dims.z, to_string(spec.type),
+                                            spec.header_bytes ? fmt::format(" after a {}-byte header", spec.header_bytes) : "",
+                                            expected))
+          .with_file(path)
+          .with_field("dims");
+    }
+    void* map = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd_, 0);
+    if (map == MAP_FAILED) {
+      const int err = errno;
+      ::close(fd_);
+      throw Error(Errc::io, fmt::format("cannot map: {}", std::strerror(err))).with_file(path);
+    }
+    ::madvise(map, size_, MADV_SEQUENTIAL);
+    map_ = static_cast<const std::byte*>(map);
+  }
+  ~RawSource() override {
+    ::munmap(const_cast<std::byte*>(map_), size_);
+    ::close(fd_);
+  }
+
+  std::string name() const override { return path_; }
+  Vec3s dims() const override { return spec_.dims; }
+  ValueType type() const override { return spec_.type; }
+  Vec3d spacing() const override { return spec_.spacing; }
+  Vec3d origin() const override { return spec_.origin; }
+  std::optional<ValueRange> value_range_hint() const override { return spec_.range; }
+  uint64_t input_bytes() const override { return size_; }
+
+  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
+    const size_t slice = size_t(spec_.dims.x * spec_.dims.y) * size_of(spec_.type);
+    const std::byte* src = map_ + spec_.header_bytes + size_t(z0) * slice;
+    BY_CHECK_EQ(out.size(), size_t(z1 - z0) * slice);
+    std::memcpy(out.data(), src, out.size());
+    if (!spec_.little_endian && size_of(spec_.type) > 1) swap_bytes(out);
+    // Pages already copied will not be read again: let the kernel drop them, so importing a
+    // file larger than memory does not evict everything else.
+    const uintptr_t page = uintptr_t(::sysconf(_SC_PAGESIZE));
+    const uintptr_t start = uintptr_t(src) & ~(page - 1);
+    ::madvise(reinterpret_cast<void*>(start), uintptr_t(src + out.size()) - start, MADV_DONTNEED);
+  }
+
+  std::string describe_json() const override {
+    nlohmann::json j = {{"kind", "raw"},
+                        {"path", path_},
+                        {"bytes", size_},
+                        {"mtime_ns", mtime_ns_},
+                        {"header_bytes", spec_.header_bytes},
+                        {"endianness", spec_.little_endian ? "little" : "big"}};
+    return j.dump();
+  }
+
+ private:
+  void swap_bytes(std::span<std::byte> data) const {
+    const size_t n = size_of(spec_.type);
+    for (size_t i = 0; i + n <= data.size(); i += n) std::reverse(data.begin() + long(i), data.begin() + long(i + n));
+  }
+
+  std::string path_;
+  RawFileSpec spec_;
+  int fd_ = -1;
+  uint64_t size_ = 0;
+  int64_t mtime_ns_ = 0;
+  const std::byte* map_ = nullptr;
+};
+
+class FieldSource final : public VolumeSource {
+ public:
+  FieldSource(std::unique_ptr<Field> field, const Vec3s& dims, ValueType type)
+      : field_(std::move(field)), sampler_(*field_, dims, type) {}
+
+  std::string name() const override { return fmt::format("field {}", field_->name()); }
+  Vec3s dims() const override { return sampler_.dims(); }
+  ValueType type() const override { return sampler_.type(); }
+  Vec3d spacing() const override { return sampler_.spacing(); }
+  Vec3d origin() const override { return sampler_.origin(); }
+  bool may_contain_nonfinite() const override { return false; }
+  std::optional<ValueRange> value_range_hint() const override {
+    if (is_integer(type())) return ValueRange{0.0, integer_max(type())};
+    return field_->range();
+  }
+  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override { sampler_.sample_slab(z0, z1, out); }
+  std::string describe_json() const override {
+    nlohmann::json params = nlohmann::json::object();
+    for (const auto& p : field_->params()) params[p.name] = p.value;
+    nlohmann::json j = {{"kind", "field"}, {"field", std::string(field_->name())}, {"params", params}};
+    if (is_integer(type())) j["quantization"] = {field_->range().lo, field_->range().hi};
+    return j.dump();
+  }
+
+ private:
+  std::unique_ptr<Field> field_;
+  GridSampler sampler_;
+};
+
+}  // namespace
+
+std::unique_ptr<VolumeSource> open_raw_source(const std::string& path, const RawFileSpec& spec) {
+  return std::make_unique<RawSource>(path, spec);
+}
+
+std::unique_ptr<VolumeSource> make_field_source(std::unique_ptr<Field> field, const Vec3s& dims, ValueType type) {
+  return std::make_unique<FieldSource>(std::move(field), dims, type);
+}
+
+}  // namespace brickyard

@@ -1,0 +1,156 @@
+#include "storage/manifest.h"
+
+#include <algorithm>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+
+namespace brickyard {
+
+using nlohmann::json;
+
+uint64_t Histogram::total() const {
+  uint64_t n = 0;
+  for (uint64_t c : counts) n += c;
+  return n;
+}
+
+double Histogram::quantile(double q) const {
+  const uint64_t n = total();
+  if (n == 0 || counts.empty()) return lo;
+  const double target = q * double(n);
+  double acc = 0;
+  for (size_t i = 0; i < counts.size(); ++i) {
+    acc += double(counts[i]);
+    if (acc >= target) return lo + (hi - lo) * double(i + 1) / double(counts.size());
+  }
+  return hi;
+}
+
+StoreLayout Manifest::layout() const { return StoreLayout::make(dims, format.brick_size); }
+
+std::string Manifest::to_json() const {
+  json j;
+  j["format"] = "brickyard-store";
+  j["format_version"] = format_version;
+  j["complete"] = complete;
+  j["dims"] = {dims.x, dims.y, dims.z};
+  j["spacing"] = {spacing.x, spacing.y, spacing.z};
+  j["origin"] = {origin.x, origin.y, origin.z};
+  j["value_type"] = std::string(to_string(format.type));
+  j["brick_size"] = format.brick_size;
+  j["apron"] = format.apron;
+  j["codec"] = {{"name", std::string(to_string(format.codec))}, {"hc_level", format.hc_level}, {"shuffle", format.shuffles()}};
+  j["levels"] = levels;
+  j["value_range"] = {min_value, max_value};
+  j["background"] = background;
+  j["histogram"] = {{"lo", histogram.lo}, {"hi", histogram.hi}, {"counts", histogram.counts}};
+  json st = json::array();
+  for (const auto& s : stats)
+    st.push_back({{"bricks", s.bricks}, {"constant", s.constant}, {"empty", s.empty}, {"raw_bytes", s.raw_bytes},
+                  {"stored_bytes", s.stored_bytes}});
+  j["level_stats"] = st;
+  j["source"] = json::parse(source);
+  j["build"] = json::parse(build);
+  return j.dump(2);
+}
+
+namespace {
+struct Reader {
+  const json& j;
+  const std::string& path;
+
+  const json& at(const char* key) const {
+    auto it = j.find(key);
+    if (it == j.end()) throw Error(Errc::format, "missing key").with_file(path).with_field(key);
+    return *it;
+  }
+  template <typename T>
+  T get(const char* key) const {
+    const json& v = at(key);
+    try {
+      return v.get<T>();
+    } catch (const json::exception&) {
+      throw Error(Errc::format, fmt::format("wrong type ({})", v.type_name())).with_file(path).with_field(key);
+    }
+  }
+  template <typename T>
+  Vec3<T> vec3(const char* key) const {
+    auto v = get<std::vector<T>>(key);
+    if (v.size() != 3)
+      throw Error(Errc::format, fmt::format("expected 3 numbers, got {}", v.size())).with_file(path).with_field(key);
+    return {v[0], v[1], v[2]};
+  }
+};
+}  // namespace
+
+Manifest Manifest::from_json(const std::string& text, const std::string& path) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw Error(Errc::format, fmt::format("manifest is not valid JSON: {}", e.what())).with_file(path);
+  }
+  if (!j.is_object()) throw Error(Errc::format, "manifest is not a JSON object").with_file(path);
+  Reader r{j, path};
+  if (r.get<std::string>("format") != "brickyard-store")
+    throw Error(Errc::format, "not a brickyard store manifest").with_file(path).with_field("format");
+  Manifest m;
+  m.format_version = r.get<int>("format_version");
+  if (m.format_version > kStoreFormatVersion)
+    throw Error(Errc::unsupported, fmt::format("store format version {} is newer than this build reads ({}); "
+                                               "upgrade brickyard", m.format_version, kStoreFormatVersion))
+        .with_file(path)
+        .with_field("format_version");
+  if (m.format_version < 1)
+    throw Error(Errc::format, fmt::format("invalid format version {}", m.format_version)).with_file(path).with_field("format_version");
+  m.complete = r.get<bool>("complete");
+  m.dims = r.vec3<int64_t>("dims");
+  m.spacing = r.vec3<double>("spacing");
+  m.origin = r.vec3<double>("origin");
+  const auto type = parse_value_type(r.get<std::string>("value_type"));
+  if (!type) throw Error(Errc::format, "unknown value type").with_file(path).with_field("value_type");
+  m.format.type = *type;
+  m.format.brick_size = r.get<int>("brick_size");
+  m.format.apron = r.get<int>("apron");
+  if (m.format.apron < 0 || m.format.apron > 4)
+    throw Error(Errc::format, fmt::format("apron {} is outside [0, 4]", m.format.apron)).with_file(path).with_field("apron");
+  const json& codec = r.at("codec");
+  Reader rc{codec, path};
+  const auto codec_name = rc.get<std::string>("name");
+  if (codec_name == "lz4") m.format.codec = Codec::lz4;
+  else if (codec_name == "lz4hc") m.format.codec = Codec::lz4hc;
+  else if (codec_name == "none") m.format.codec = Codec::none;
+  else throw Error(Errc::unsupported, fmt::format("unknown codec '{}'", codec_name)).with_file(path).with_field("codec.name");
+  m.format.hc_level = rc.get<int>("hc_level");
+  m.format.shuffle = rc.get<bool>("shuffle");
+  m.levels = r.get<int>("levels");
+  const auto range = r.get<std::vector<double>>("value_range");
+  if (range.size() != 2) throw Error(Errc::format, "expected [min, max]").with_file(path).with_field("value_range");
+  m.min_value = range[0];
+  m.max_value = range[1];
+  m.background = r.get<double>("background");
+  const json& h = r.at("histogram");
+  Reader rh{h, path};
+  m.histogram.lo = rh.get<double>("lo");
+  m.histogram.hi = rh.get<double>("hi");
+  m.histogram.counts = rh.get<std::vector<uint64_t>>("counts");
+  for (const json& s : r.at("level_stats")) {
+    Reader rs{s, path};
+    m.stats.push_back({rs.get<int64_t>("bricks"), rs.get<int64_t>("constant"), rs.get<int64_t>("empty"),
+                       rs.get<uint64_t>("raw_bytes"), rs.get<uint64_t>("stored_bytes")});
+  }
+  m.source = r.at("source").dump();
+  m.build = r.at("build").dump();
+  // The layout must agree with the recorded level count, or nothing else can be trusted.
+  const StoreLayout layout = m.layout();
+  if (layout.levels != m.levels)
+    throw Error(Errc::format, fmt::format("{} levels recorded, but dims and brick size give {}", m.levels, layout.levels))
+        .with_file(path)
+        .with_field("levels");
+  return m;
+}
+
+}  // namespace brickyard
