@@ -22,6 +22,8 @@ int main(int argc, char** argv) {
 
   cli::add_generate_command(app, global);
   cli::add_version_command(app);
+  int exit_status = 0;
+  cli::add_store_commands(app, exit_status);
 
   std::unique_ptr<tbb::global_control> thread_limit;
   app.parse_complete_callback([&] {
@@ -53,5 +55,5 @@ int main(int argc, char** argv) {
     std::cerr << "brickyard: error: " << e.what() << '\n';
     return 1;
   }
-  return 0;
+  return exit_status;
 }

@@ -1,6 +1,7 @@
 #include "apps/parse.h"
 
 #include <charconv>
+#include <cctype>
 #include <cmath>
 #include <vector>
 
@@ -32,6 +33,68 @@ Vec3s parse_size(std::string_view text, std::string_view option) {
   if (parts.size() == 3) return {parts[0], parts[1], parts[2]};
   throw Error(Errc::invalid_argument, fmt::format("'{}' has {} dimensions; give 1 or 3", text, parts.size()))
       .with_field(option);
+}
+
+namespace {
+std::vector<double> parse_numbers(std::string_view text, std::string_view option, std::string_view what) {
+  std::vector<double> out;
+  size_t start = 0;
+  while (true) {
+    const size_t end = text.find(',', start);
+    const std::string_view part = text.substr(start, end == std::string_view::npos ? std::string_view::npos : end - start);
+    double v = 0;
+    auto [ptr, ec] = std::from_chars(part.data(), part.data() + part.size(), v);
+    if (part.empty() || ec != std::errc() || ptr != part.data() + part.size() || !std::isfinite(v))
+      throw Error(Errc::invalid_argument, fmt::format("'{}' is not {}", text, what)).with_field(option);
+    out.push_back(v);
+    if (end == std::string_view::npos) break;
+    start = end + 1;
+  }
+  return out;
+}
+}  // namespace
+
+Vec3d parse_vec3(std::string_view text, std::string_view option) {
+  const auto v = parse_numbers(text, option, "X,Y,Z");
+  if (v.size() != 3) throw Error(Errc::invalid_argument, fmt::format("'{}' is not X,Y,Z", text)).with_field(option);
+  return {v[0], v[1], v[2]};
+}
+
+std::pair<double, double> parse_range(std::string_view text, std::string_view option) {
+  const auto v = parse_numbers(text, option, "LO,HI");
+  if (v.size() != 2 || v[0] > v[1])
+    throw Error(Errc::invalid_argument, fmt::format("'{}' is not LO,HI with LO <= HI", text)).with_field(option);
+  return {v[0], v[1]};
+}
+
+std::vector<int64_t> parse_int_list(std::string_view text, size_t count, std::string_view option) {
+  const auto v = parse_numbers(text, option, fmt::format("{} integers", count));
+  std::vector<int64_t> out;
+  for (double d : v) {
+    if (d != std::floor(d))
+      throw Error(Errc::invalid_argument, fmt::format("'{}' holds a non-integer", text)).with_field(option);
+    out.push_back(int64_t(d));
+  }
+  if (out.size() != count)
+    throw Error(Errc::invalid_argument, fmt::format("'{}' has {} numbers; give {}", text, out.size(), count)).with_field(option);
+  return out;
+}
+
+uint64_t parse_bytes(std::string_view text, std::string_view option) {
+  size_t digits = 0;
+  while (digits < text.size() && (std::isdigit(static_cast<unsigned char>(text[digits])) || text[digits] == '.')) ++digits;
+  double v = 0;
+  auto [ptr, ec] = std::from_chars(text.data(), text.data() + digits, v);
+  const std::string_view unit = text.substr(digits);
+  double scale = 0;
+  if (unit.empty() || unit == "B") scale = 1;
+  else if (unit == "KiB" || unit == "KB" || unit == "K") scale = 1024.0;
+  else if (unit == "MiB" || unit == "MB" || unit == "M") scale = 1024.0 * 1024;
+  else if (unit == "GiB" || unit == "GB" || unit == "G") scale = 1024.0 * 1024 * 1024;
+  else if (unit == "TiB" || unit == "TB" || unit == "T") scale = 1024.0 * 1024 * 1024 * 1024;
+  if (digits == 0 || ec != std::errc() || ptr != text.data() + digits || scale == 0 || v <= 0)
+    throw Error(Errc::invalid_argument, fmt::format("'{}' is not a size such as 64MiB", text)).with_field(option);
+  return uint64_t(v * scale);
 }
 
 std::pair<std::string, double> parse_assignment(std::string_view text, std::string_view option) {

@@ -4,6 +4,7 @@
 #include <string>
 #include <string_view>
 #include <utility>
+#include <vector>
 
 #include "core/math.h"
 
@@ -11,6 +12,14 @@ namespace brickyard::cli {
 
 /// @brief "N" -> (N, N, N); "X,Y,Z" or "XxYxZ" -> (X, Y, Z). Each at least 1.
 Vec3s parse_size(std::string_view text, std::string_view option);
+/// @brief "X,Y,Z" finite numbers.
+Vec3d parse_vec3(std::string_view text, std::string_view option);
+/// @brief "LO,HI" finite numbers with LO <= HI.
+std::pair<double, double> parse_range(std::string_view text, std::string_view option);
+/// @brief Exactly `count` comma-separated integers.
+std::vector<int64_t> parse_int_list(std::string_view text, size_t count, std::string_view option);
+/// @brief "64MiB", "2GiB", "1048576", "512KiB" (also KB/MB/GB as binary units).
+uint64_t parse_bytes(std::string_view text, std::string_view option);
 /// @brief "name=value" with a finite numeric value.
 std::pair<std::string, double> parse_assignment(std::string_view text, std::string_view option);
 

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job on the built-in default dataset, as far as the pipeline goes today:
-# generate the default procedural volume (Marschner-Lobb, 256^3 f32) and describe it.
+# generate the default procedural volume (Marschner-Lobb, 256^3 f32), import it into a
+# multiresolution brick store, verify the store and describe it.
 # Outputs go to out/demo/ (override with BRICKYARD_OUT=dir).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,8 +12,12 @@ mkdir -p "$out"
 
 "$by" version
 "$by" generate marschner-lobb --size 256 --type f32 --out "$out/default.raw"
+"$by" import "$out/default.raw" --out "$out/default.store"
+"$by" verify "$out/default.store"
+"$by" info "$out/default.store"
 
 echo
 echo "outputs in $out/:"
-echo "  default.raw       the default dataset, 256^3 f32 voxels (x fastest, little-endian)"
-echo "  default.raw.json  its sidecar: dims, type, spacing, origin, value range, XXH3-64 checksum"
+echo "  default.raw         the default dataset, 256^3 f32 voxels (x fastest, little-endian)"
+echo "  default.raw.json    its sidecar: dims, type, spacing, origin, value range, XXH3-64 checksum"
+echo "  default.store/      its brick store (LMDB): brickyard info|verify|export $out/default.store"

@@ -52,6 +52,22 @@ inline CommandResult run_command(const std::string& command) {
   return r;
 }
 
+/// Flips `count` payload bytes of every copy of the first brick record found in an LMDB data
+/// file (copy-on-write leaves stale copies of pages behind, so the live one is among them).
+/// Returns the header bytes of that record (magic through z) for the caller to decode.
+inline std::string corrupt_first_brick(const std::string& data_mdb, size_t payload_offset, size_t count) {
+  std::ifstream in(data_mdb, std::ios::binary);
+  std::string data{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  in.close();
+  const size_t first = data.find("BYBK");
+  if (first == std::string::npos) return {};
+  const std::string header = data.substr(first, 28);  // magic .. z: identifies the brick
+  for (size_t at = data.find(header); at != std::string::npos; at = data.find(header, at + 1))
+    for (size_t i = 0; i < count && at + 64 + payload_offset + i < data.size(); ++i) data[at + 64 + payload_offset + i] ^= char(0x5a);
+  std::ofstream(data_mdb, std::ios::binary | std::ios::trunc) << data;
+  return header;
+}
+
 inline std::string read_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};

@@ -1,0 +1,388 @@
+// Store subcommands: import, info, verify, export.
+
+#include <algorithm>
+#include <atomic>
+#include <filesystem>
+#include <iostream>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "apps/commands.h"
+#include "apps/parse.h"
+#include "core/error.h"
+#include "core/parallel.h"
+#include "core/progress.h"
+#include "core/raw_volume.h"
+#include "core/units.h"
+#include "fields/field.h"
+#include "preprocess/builder.h"
+#include "preprocess/export.h"
+#include "preprocess/volume_source.h"
+#include "storage/brick_store.h"
+
+namespace brickyard::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+// ----------------------------------------------------------------------------------- import
+
+struct ImportOptions {
+  std::string source;
+  std::string out;
+  // raw
+  std::string dims, type, endian = "little", spacing, origin;
+  uint64_t header_bytes = 0;
+  // field
+  std::string size = "256";
+  std::vector<std::string> params;
+  // vdb
+  std::string grid;
+  // build
+  int brick_size = 32, apron = 1, hc_level = 9;
+  std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size;
+  double constant_tolerance = 0;
+  bool no_shuffle = false, no_map_growth = false, force = false;
+};
+
+bool has_extension(const std::string& path, std::initializer_list<const char*> exts) {
+  std::string ext = fs::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return std::any_of(exts.begin(), exts.end(), [&](const char* e) { return ext == e; });
+}
+
+std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
+  if (o.source.rfind("field:", 0) == 0) {
+    FieldParamValues params;
+    for (const auto& s : o.params) params.insert(parse_assignment(s, "--set"));
+    const ValueType type = value_type_from_string(o.type.empty() ? "f32" : o.type, "--type");
+    return make_field_source(make_field(o.source.substr(6), params), parse_size(o.size, "--size"), type);
+  }
+  if (!o.params.empty()) throw Error(Errc::invalid_argument, "--set applies to field: sources only").with_field("--set");
+  if (has_extension(o.source, {".nrrd", ".nhdr"})) return open_nrrd_source(o.source);
+  if (has_extension(o.source, {".vdb"})) return open_vdb_source(o.source, o.grid);
+  if (!o.grid.empty()) throw Error(Errc::invalid_argument, "--grid applies to .vdb sources only").with_field("--grid");
+
+  // Raw: the sidecar describes it unless flags say otherwise; flags override the sidecar.
+  RawFileSpec spec;
+  const std::string sidecar = raw_sidecar_path(o.source);
+  std::error_code ec;
+  const bool have_sidecar = fs::exists(sidecar, ec);
+  if (have_sidecar) {
+    const RawVolumeInfo info = read_raw_sidecar(sidecar);
+    spec.dims = info.dims;
+    spec.type = info.type;
+    spec.little_endian = info.little_endian;
+    spec.spacing = info.spacing;
+    spec.origin = info.origin;
+    spec.range = ValueRange{info.min_value, info.max_value};
+  } else if (o.dims.empty() || o.type.empty()) {
+    throw Error(Errc::invalid_argument,
+                fmt::format("a raw file needs --dims and --type, or a sidecar {} describing it", sidecar))
+        .with_file(o.source);
+  }
+  if (!o.dims.empty()) {
+    spec.dims = parse_size(o.dims, "--dims");
+    spec.range.reset();  // the sidecar's range described other dims
+  }
+  if (!o.type.empty()) {
+    const ValueType t = value_type_from_string(o.type, "--type");
+    if (t != spec.type) spec.range.reset();
+    spec.type = t;
+  }
+  if (o.endian != "little" && o.endian != "big")
+    throw Error(Errc::invalid_argument, fmt::format("'{}' is neither little nor big", o.endian)).with_field("--endian");
+  if (o.endian == "big") spec.little_endian = false;
+  spec.header_bytes = o.header_bytes;
+  if (!o.spacing.empty()) spec.spacing = parse_vec3(o.spacing, "--spacing");
+  if (!o.origin.empty()) spec.origin = parse_vec3(o.origin, "--origin");
+  return open_raw_source(o.source, spec);
+}
+
+void run_import(const ImportOptions& o) {
+  auto source = open_source(o);
+  BuildOptions b;
+  b.brick_size = o.brick_size;
+  b.apron = o.apron;
+  if (o.codec == "lz4") b.codec = Codec::lz4;
+  else if (o.codec == "lz4hc") b.codec = Codec::lz4hc;
+  else throw Error(Errc::invalid_argument, fmt::format("unknown codec '{}' (expected lz4 or lz4hc)", o.codec)).with_field("--codec");
+  b.hc_level = o.hc_level;
+  b.shuffle = !o.no_shuffle;
+  b.downsample = parse_downsample(o.downsample);
+  b.nonfinite = parse_nonfinite(o.nonfinite);
+  b.constant_tolerance = o.constant_tolerance;
+  if (!o.range.empty()) b.clamp = parse_range(o.range, "--range");
+  if (!o.map_size.empty()) b.map_size = parse_bytes(o.map_size, "--map-size");
+  b.map_growth = !o.no_map_growth;
+  b.force = o.force;
+
+  const Vec3s d = source->dims();
+  std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
+  Progress progress(fmt::format("import {}", fs::path(source->name()).filename().string()), uint64_t(volume(d)), "voxels");
+  const BuildResult r = build_store(*source, o.out, b, &progress);
+  progress.finish();
+  if (r.up_to_date) {
+    std::cout << fmt::format("{} is complete and up to date; nothing to do (--force rebuilds)\n", o.out);
+    return;
+  }
+  if (r.rebuilt_incomplete) std::cout << "an interrupted earlier build was discarded and rebuilt\n";
+  std::cout << fmt::format("wrote {}: {} levels, {} of bricks from {} of input ({:.2f}x) in {} ({}/s)\n", o.out,
+                           r.manifest.levels, format_bytes(double(r.stored_bytes)), format_bytes(double(r.input_bytes)),
+                           double(r.input_bytes) / std::max<double>(1, double(r.stored_bytes)), format_duration(r.seconds),
+                           format_bytes(double(r.input_bytes) / std::max(1e-9, r.seconds)));
+}
+
+// ------------------------------------------------------------------------------------- info
+
+std::string sparkline(const Histogram& h, int width) {
+  static const char* bars[] = {" ", "▁", "▂", "▃", "▄", "▅", "▆", "▇", "█"};
+  if (h.counts.empty()) return {};
+  std::vector<double> cols(size_t(width), 0);
+  for (size_t i = 0; i < h.counts.size(); ++i) cols[i * size_t(width) / h.counts.size()] += double(h.counts[i]);
+  double mx = *std::max_element(cols.begin(), cols.end());
+  std::string out;
+  for (double c : cols) {
+    // Log scale: volume histograms are dominated by the background bin.
+    const double f = mx > 0 && c > 0 ? std::log1p(c) / std::log1p(mx) : 0;
+    out += bars[std::clamp(int(std::ceil(f * 8)), 0, 8)];
+  }
+  return out;
+}
+
+void run_info(const std::string& path, bool json) {
+  BrickStore store(path, {.allow_incomplete = true});
+  const Manifest& m = store.manifest();
+  if (json) {
+    std::cout << m.to_json() << '\n';
+    return;
+  }
+  const StoreLayout& l = store.layout();
+  const BrickFormat& f = m.format;
+  std::cout << fmt::format("store {}: {}, format version {}\n", path, m.complete ? "complete" : "INCOMPLETE (build interrupted)",
+                           m.format_version);
+  std::cout << fmt::format("volume {}x{}x{} {}, spacing ({:g}, {:g}, {:g}), origin ({:g}, {:g}, {:g})\n", m.dims.x, m.dims.y,
+                           m.dims.z, to_string(f.type), m.spacing.x, m.spacing.y, m.spacing.z, m.origin.x, m.origin.y,
+                           m.origin.z);
+  std::cout << fmt::format("bricks {}^3 + apron {}, {}{}, {} levels, node table {}\n", f.brick_size, f.apron,
+                           to_string(f.codec), f.shuffles() ? " after byte-shuffle" : "", m.levels,
+                           format_bytes(double(store.nodes().bytes())));
+  if (!m.complete) return;
+  std::cout << fmt::format("values [{:g}, {:g}], background {:g}\n\n", m.min_value, m.max_value, m.background);
+  std::cout << fmt::format("{:>5} {:>16} {:>12} {:>9} {:>9} {:>10} {:>10} {:>10} {:>7}\n", "level", "voxels", "bricks",
+                           "constant", "empty", "stored", "raw", "on disk", "ratio");
+  LevelStats total;
+  for (int i = 0; i < l.levels; ++i) {
+    const LevelStats& s = m.stats[size_t(i)];
+    const Vec3s d = l.level_dims(i);
+    std::cout << fmt::format("{:>5} {:>16} {:>12} {:>8.1f}% {:>8.1f}% {:>10} {:>10} {:>10} {:>6.2f}x\n", i,
+                             fmt::format("{}x{}x{}", d.x, d.y, d.z), s.bricks, 100.0 * double(s.constant) / double(s.bricks),
+                             100.0 * double(s.empty) / double(s.bricks), s.bricks - s.constant,
+                             format_bytes(double(s.raw_bytes)), format_bytes(double(s.stored_bytes)),
+                             double(s.raw_bytes) / std::max(1.0, double(s.stored_bytes)));
+    total.bricks += s.bricks;
+    total.constant += s.constant;
+    total.empty += s.empty;
+    total.raw_bytes += s.raw_bytes;
+    total.stored_bytes += s.stored_bytes;
+  }
+  const double input = double(volume(m.dims)) * double(size_of(f.type));
+  std::cout << fmt::format("{:>5} {:>16} {:>12} {:>8.1f}% {:>8.1f}% {:>10} {:>10} {:>10} {:>6.2f}x\n", "all", "",
+                           total.bricks, 100.0 * double(total.constant) / double(total.bricks),
+                           100.0 * double(total.empty) / double(total.bricks), total.bricks - total.constant,
+                           format_bytes(double(total.raw_bytes)), format_bytes(double(total.stored_bytes)),
+                           double(total.raw_bytes) / std::max(1.0, double(total.stored_bytes)));
+  std::cout << fmt::format("input {} -> {} on disk: {:.2f}x smaller, all levels included\n\n", format_bytes(input),
+                           format_bytes(double(total.stored_bytes)), input / std::max(1.0, double(total.stored_bytes)));
+  const Histogram& h = m.histogram;
+  std::cout << fmt::format("histogram [{:g}, {:g}] |{}|\n", h.lo, h.hi, sparkline(h, 64));
+  std::cout << fmt::format("quantiles p1 {:g}  p10 {:g}  p50 {:g}  p90 {:g}  p99 {:g}\n\n", h.quantile(0.01),
+                           h.quantile(0.1), h.quantile(0.5), h.quantile(0.9), h.quantile(0.99));
+  std::cout << "source " << nlohmann::json::parse(m.source).dump() << "\n";
+  std::cout << "build  " << nlohmann::json::parse(m.build).dump() << "\n";
+}
+
+// ----------------------------------------------------------------------------------- verify
+
+int run_verify(const std::string& path) {
+  BrickStore store(path, {.allow_incomplete = true});
+  if (!store.manifest().complete) {
+    std::cout << fmt::format("{}: INCOMPLETE: the build was interrupted; nothing else checked\n", path);
+    return 1;
+  }
+  const StoreLayout& l = store.layout();
+  const BrickFormat& f = store.format();
+  std::mutex bad_mutex;
+  std::vector<std::pair<BrickKey, std::string>> bad;
+  auto report = [&](const BrickKey& k, std::string why) {
+    std::lock_guard lock(bad_mutex);
+    bad.emplace_back(k, std::move(why));
+  };
+
+  // Step 1: every stored record belongs to a non-constant node inside the layout.
+  std::vector<BrickKey> stored;
+  {
+    auto txn = store.begin_read();
+    store.for_each_record(txn, [&](const BrickKey& k, std::span<const std::byte>) {
+      if (!l.contains(k)) report(k, "record outside the store's layout");
+      else if (store.nodes().at(k).is_constant()) report(k, "record for a constant node");
+      stored.push_back(k);
+      return true;
+    });
+  }
+  // Step 2: every node: flags, and for stored bricks a full decode with checksum and ranges.
+  Progress progress("verify", uint64_t(l.total_bricks()), "bricks");
+  std::atomic<int64_t> decoded{0};
+  for (int level = 0; level < l.levels; ++level) {
+    const int64_t n = l.brick_count(level);
+    parallel_for<int64_t>(0, n, 16, [&](int64_t i0, int64_t i1) {
+      auto txn = store.begin_read();
+      std::vector<std::byte> buffer(f.bytes());
+      for (int64_t i = i0; i < i1; ++i) {
+        const BrickKey k = l.key_at(level, i);
+        const NodeRecord& node = store.nodes().at(k);
+        const bool finest = level == l.finest();
+        if (bool(node.flags & kNodeFinest) != finest || bool(node.flags & kNodeHasChildren) == finest)
+          report(k, fmt::format("node flags 0x{:x} do not match level {}", node.flags, level));
+        if (!(node.min <= node.max)) report(k, fmt::format("node range [{}, {}] is inverted", node.min, node.max));
+        if (node.is_constant()) {
+          if (store.record(txn, k)) report(k, "constant node has a record");
+          if (node.constant < node.min || node.constant > node.max)
+            report(k, fmt::format("constant {} outside the node range [{}, {}]", node.constant, node.min, node.max));
+          continue;
+        }
+        auto rec = store.record(txn, k);
+        if (!rec) {
+          report(k, "record missing");
+          continue;
+        }
+        try {
+          decode_brick(f, k, *rec, buffer);
+          const BrickHeader h = read_brick_header(*rec, k);
+          dispatch_value_type(f.type, [&](auto tag) {
+            using T = decltype(tag);
+            const T* v = reinterpret_cast<const T*>(buffer.data());
+            const auto [mn, mx] = std::minmax_element(v, v + f.voxels());
+            if (float(*mn) != h.min || float(*mx) != h.max)
+              report(k, fmt::format("header range [{}, {}] but the voxels span [{}, {}]", h.min, h.max, double(*mn), double(*mx)));
+            if (node.min < float(*mn) || node.max > float(*mx))
+              report(k, fmt::format("node range [{}, {}] is not inside the brick's [{}, {}]", node.min, node.max, double(*mn), double(*mx)));
+          });
+          decoded.fetch_add(1, std::memory_order_relaxed);
+        } catch (const Error& e) {
+          report(k, e.message());
+        }
+      }
+      progress.advance(uint64_t(i1 - i0));
+    });
+  }
+  progress.finish();
+  std::sort(bad.begin(), bad.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [k, why] : bad) std::cout << fmt::format("BAD {}: {}\n", k.to_string(), why);
+  std::cout << fmt::format("{}: {} nodes, {} bricks decoded, {} problems\n", path, l.total_bricks(), decoded.load(), bad.size());
+  return bad.empty() ? 0 : 1;
+}
+
+// ----------------------------------------------------------------------------------- export
+
+void run_export(const std::string& path, int level, const std::string& box_text, const std::string& out,
+                const std::string& grid) {
+  BrickStore store(path);
+  std::optional<VoxelBox> box;
+  if (!box_text.empty()) {
+    const auto v = parse_int_list(box_text, 6, "--box");
+    box = VoxelBox{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
+  }
+  if (level < 0) level = store.layout().finest();
+  const VoxelBox region = export_region(store, level, box);
+  Progress progress(fmt::format("export level {}", level), uint64_t(volume(region.size())), "voxels");
+  if (has_extension(out, {".vdb"})) {
+    export_vdb(store, level, region, out, grid, &progress);
+    progress.finish();
+    std::cout << fmt::format("wrote {}\n", out);
+    return;
+  }
+  const RawVolumeInfo info = export_raw(store, level, region, out, &progress);
+  progress.finish();
+  std::cout << fmt::format("wrote {} ({}x{}x{} {}, {}) and {}\n", out, info.dims.x, info.dims.y, info.dims.z,
+                           to_string(info.type), format_bytes(double(info.bytes)), raw_sidecar_path(out));
+}
+
+}  // namespace
+
+void add_store_commands(CLI::App& app, int& exit_status) {
+  {
+    auto o = std::make_shared<ImportOptions>();
+    auto* cmd = app.add_subcommand("import", "Build a multiresolution brick store from a volume");
+    cmd->add_option("SOURCE", o->source,
+                    "A raw file (described by FILE.json or --dims/--type), a .nrrd/.nhdr file, a .vdb file, "
+                    "or field:NAME for a procedural field")
+        ->required();
+    cmd->add_option("-o,--out", o->out, "Store directory")->required();
+    auto* raw = "Raw input";
+    cmd->add_option("--dims", o->dims, "Raw: NX,NY,NZ (or N)")->group(raw);
+    cmd->add_option("-t,--type", o->type, "Raw or field: u8, u16 or f32")->group(raw);
+    cmd->add_option("--endian", o->endian, "Raw: little or big")->capture_default_str()->group(raw);
+    cmd->add_option("--header-bytes", o->header_bytes, "Raw: bytes to skip before the data")->group(raw);
+    cmd->add_option("--spacing", o->spacing, "Raw: SX,SY,SZ")->group(raw);
+    cmd->add_option("--origin", o->origin, "Raw: OX,OY,OZ")->group(raw);
+    auto* field = "Field input";
+    cmd->add_option("-s,--size", o->size, "Field: grid size N or NX,NY,NZ")->capture_default_str()->group(field);
+    cmd->add_option("--set", o->params, "Field: parameter NAME=VALUE (repeatable)")->group(field);
+    cmd->add_option("--grid", o->grid, "OpenVDB: grid name (default: the only grid)")->group("OpenVDB input");
+    auto* build = "Build";
+    cmd->add_option("--brick-size", o->brick_size, "Brick interior edge M: a power of two in [8, 128]")
+        ->capture_default_str()->group(build);
+    cmd->add_option("--apron", o->apron, "Replicated voxels around each brick: 1 for trilinear, 2 for central differences")
+        ->capture_default_str()->group(build);
+    cmd->add_option("--codec", o->codec, "lz4 (fast) or lz4hc (smaller, slower to build)")->capture_default_str()->group(build);
+    cmd->add_option("--hc-level", o->hc_level, "LZ4-HC level 1..12")->capture_default_str()->group(build);
+    cmd->add_flag("--no-shuffle", o->no_shuffle, "Do not byte-shuffle u16/f32 bricks before compression")->group(build);
+    cmd->add_option("--downsample", o->downsample, "Coarser levels: average, min or max of each 2x2x2 block")
+        ->capture_default_str()->group(build);
+    cmd->add_option("--constant-tolerance", o->constant_tolerance, "Store a brick as constant when max - min <= this")
+        ->capture_default_str()->group(build);
+    cmd->add_option("--range", o->range, "Clamp values into LO,HI (stored units) before building")->group(build);
+    cmd->add_option("--nonfinite", o->nonfinite, "NaN/Inf voxels: reject, zero, or clamp (to the finite range)")
+        ->capture_default_str()->group(build);
+    cmd->add_option("--map-size", o->map_size, "Initial LMDB map size, e.g. 64MiB (default: from the input size)")->group(build);
+    cmd->add_flag("--no-map-growth", o->no_map_growth, "Fail instead of growing the map when it is full")->group(build);
+    cmd->add_flag("--force", o->force, "Rebuild a complete store made from another source or with other parameters")
+        ->group(build);
+    cmd->callback([o] { run_import(*o); });
+  }
+  {
+    auto path = std::make_shared<std::string>();
+    auto json = std::make_shared<bool>(false);
+    auto* cmd = app.add_subcommand("info", "Describe a store: levels, bricks, compression, histogram, manifest");
+    cmd->add_option("STORE", *path, "Store directory")->required();
+    cmd->add_flag("--json", *json, "Print the manifest as JSON");
+    cmd->callback([path, json] { run_info(*path, *json); });
+  }
+  {
+    auto path = std::make_shared<std::string>();
+    auto* cmd = app.add_subcommand("verify", "Decode every brick and check checksums, ranges and node flags");
+    cmd->add_option("STORE", *path, "Store directory")->required();
+    cmd->callback([path, &exit_status] { exit_status = run_verify(*path); });
+  }
+  {
+    struct ExportOptions {
+      std::string store, box, out, grid;
+      int level = -1;
+    };
+    auto o = std::make_shared<ExportOptions>();
+    auto* cmd = app.add_subcommand("export", "Write one level (or a box of it) as a raw file or an OpenVDB grid");
+    cmd->add_option("STORE", o->store, "Store directory")->required();
+    cmd->add_option("-l,--level", o->level, "Level (default: the finest)");
+    cmd->add_option("--box", o->box, "X0,Y0,Z0,X1,Y1,Z1: voxels [lo, hi) at that level (default: all)");
+    cmd->add_option("-o,--out", o->out, "FILE.raw (with FILE.raw.json) or FILE.vdb")->required();
+    cmd->add_option("--grid", o->grid, "OpenVDB grid name (default: the source grid's name, or density)");
+    cmd->callback([o] { run_export(o->store, o->level, o->box, o->out, o->grid); });
+  }
+}
+
+}  // namespace brickyard::cli

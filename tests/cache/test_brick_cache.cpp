@@ -1,0 +1,405 @@
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include "cache/brick_cache.h"
+#include "cache/trace.h"
+#include "core/error.h"
+#include "preprocess/builder.h"
+#include "preprocess/volume_source.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+/// A store shared by the tests of this file: fbm 64^3 u8 with 8^3 bricks (512 finest).
+class BrickCacheTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    BuildOptions o;
+    o.brick_size = 8;
+    auto fbm = make_field_source(make_field("fbm"), {64, 64, 64}, ValueType::u8);
+    build_store(*fbm, dir_->file("fbm"), o);
+    auto blobs = make_field_source(make_field("sparse-blobs"), {64, 64, 64}, ValueType::u8);
+    build_store(*blobs, dir_->file("blobs"), o);
+    store_ = new BrickStore(dir_->file("fbm"));
+  }
+  static void TearDownTestSuite() {
+    delete store_;
+    delete dir_;
+  }
+  static std::vector<BrickKey> finest_keys(const BrickStore& s) {
+    std::vector<BrickKey> keys;
+    const StoreLayout& l = s.layout();
+    for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
+      const BrickKey k = l.key_at(l.finest(), i);
+      if (s.nodes().at(k).has_payload()) keys.push_back(k);
+    }
+    return keys;
+  }
+  static std::vector<std::byte> decoded(const BrickStore& s, const BrickKey& k) {
+    std::vector<std::byte> out(s.format().bytes());
+    s.read_brick(k, out);
+    return out;
+  }
+  static testing::TempDir* dir_;
+  static BrickStore* store_;
+};
+testing::TempDir* BrickCacheTest::dir_ = nullptr;
+BrickStore* BrickCacheTest::store_ = nullptr;
+
+CacheConfig small_config(uint32_t slots, uint64_t l2_bricks, uint64_t brick_bytes) {
+  CacheConfig c;
+  c.l1_slots = slots;
+  c.l2_bytes = l2_bricks * brick_bytes;
+  return c;
+}
+
+TEST_F(BrickCacheTest, FetchReturnsTheDecodedBrickPinnedInTheePool) {
+  BrickCache cache(*store_, small_config(16, 64, store_->format().bytes()));
+  const auto keys = finest_keys(*store_);
+  BrickHandle h = cache.fetch(keys[3]);
+  ASSERT_TRUE(h.resident());
+  ASSERT_NE(h.slot(), kNoSlot);
+  EXPECT_EQ(std::memcmp(h.bytes(), decoded(*store_, keys[3]).data(), store_->format().bytes()), 0);
+  EXPECT_EQ(h.min(), store_->nodes().at(keys[3]).min);
+  EXPECT_EQ(h.key(), keys[3]);
+  EXPECT_EQ(cache.stats().stalls, 1u);
+  BrickHandle again = cache.fetch(keys[3]);  // now an L1 hit: no stall
+  EXPECT_EQ(again.slot(), h.slot());
+  EXPECT_EQ(cache.stats().stalls, 1u);
+  EXPECT_EQ(cache.stats().l1.hits, 1u);
+}
+
+TEST_F(BrickCacheTest, AMissQueuesARequestThatTheLoaderServes) {
+  BrickCache cache(*store_, small_config(64, 64, store_->format().bytes()));
+  const auto keys = finest_keys(*store_);
+  cache.frame_begin();
+  for (int i = 0; i < 10; ++i) {
+    BrickHandle h = cache.lookup(keys[size_t(i)], float(i));
+    EXPECT_EQ(h.state(), BrickHandle::State::miss);
+  }
+  cache.lookup(keys[0], 100.0f);  // a duplicate with a higher priority: merged
+  const FrameReport report = cache.frame_end();
+  EXPECT_EQ(report.requests, 10u);
+  const auto requested = cache.frame_requests();
+  ASSERT_EQ(requested.size(), 10u);
+  EXPECT_EQ(requested[0].key, keys[0]);  // highest priority first
+  EXPECT_EQ(requested[0].priority, 100.0f);
+  EXPECT_EQ(requested[1].key, keys[9]);
+  cache.wait_idle();
+  cache.frame_begin();
+  for (int i = 0; i < 10; ++i) {
+    BrickHandle h = cache.lookup(keys[size_t(i)]);
+    ASSERT_TRUE(h.resident()) << keys[size_t(i)];
+    EXPECT_EQ(std::memcmp(h.bytes(), decoded(*store_, keys[size_t(i)]).data(), store_->format().bytes()), 0);
+  }
+  const CacheStats s = cache.stats();
+  EXPECT_EQ(s.requests, 10u);
+  EXPECT_EQ(s.uploads, 10u);
+  EXPECT_EQ(s.l3_bytes_decoded, 10 * store_->format().bytes());
+  EXPECT_GT(s.latency_p99_ms, 0.0);
+  EXPECT_EQ(s.stalls, 0u);
+}
+
+TEST_F(BrickCacheTest, ConstantNodesNeedNoSlot) {
+  BrickStore blobs(dir_->file("blobs"));
+  BrickCache cache(blobs, small_config(4, 8, blobs.format().bytes()));
+  const StoreLayout& l = blobs.layout();
+  int constants = 0;
+  for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
+    const BrickKey k = l.key_at(l.finest(), i);
+    if (!blobs.nodes().at(k).is_constant()) continue;
+    BrickHandle h = cache.lookup(k);
+    ASSERT_TRUE(h.constant());
+    EXPECT_EQ(h.slot(), kNoSlot);
+    EXPECT_EQ(h.constant_value(), blobs.nodes().at(k).constant);
+    ++constants;
+  }
+  EXPECT_GT(constants, 100);
+  EXPECT_EQ(cache.stats().l1.resident, 0u);
+  EXPECT_EQ(cache.stats().constant_hits, uint64_t(constants));
+}
+
+TEST_F(BrickCacheTest, PinnedSlotsAreNeverEvicted) {
+  BrickCache cache(*store_, small_config(4, 64, store_->format().bytes()));
+  const auto keys = finest_keys(*store_);
+  std::vector<BrickHandle> pinned;
+  for (int i = 0; i < 4; ++i) pinned.push_back(cache.fetch(keys[size_t(i)]));
+  BrickHandle extra = cache.fetch(keys[4]);  // the pool is pinned full: a private copy
+  ASSERT_TRUE(extra.resident());
+  EXPECT_EQ(extra.slot(), kNoSlot);
+  EXPECT_EQ(std::memcmp(extra.bytes(), decoded(*store_, keys[4]).data(), store_->format().bytes()), 0);
+  EXPECT_GT(cache.stats().l1.failed_evictions, 0u);
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(cache.lookup(keys[size_t(i)], 0, false).resident());
+  pinned.clear();
+  BrickHandle now = cache.fetch(keys[5]);  // room again
+  EXPECT_NE(now.slot(), kNoSlot);
+}
+
+TEST_F(BrickCacheTest, UploadsRespectThePerFrameBudget) {
+  CacheConfig c = small_config(64, 64, store_->format().bytes());
+  c.upload_bricks_per_frame = 5;
+  BrickCache cache(*store_, c);
+  const auto keys = finest_keys(*store_);
+  cache.frame_begin();
+  for (int i = 0; i < 20; ++i) cache.request(keys[size_t(i)], 1.0f);
+  cache.wait_idle();
+  EXPECT_EQ(cache.stats().uploads, 5u);
+  for (int frame = 0; frame < 3; ++frame) {
+    cache.frame_end();
+    cache.frame_begin();
+    EXPECT_EQ(cache.stats().uploads, uint64_t(5 * (frame + 2)));
+  }
+  for (int i = 0; i < 20; ++i) EXPECT_TRUE(cache.lookup(keys[size_t(i)], 0, false).resident());
+}
+
+TEST_F(BrickCacheTest, RequestsNotRenewedAreDroppedAtFrameEnd) {
+  CacheConfig c = small_config(512, 512, store_->format().bytes());
+  c.loader_threads = 1;
+  BrickCache cache(*store_, c);
+  const auto keys = finest_keys(*store_);
+  cache.frame_begin();
+  for (const auto& k : keys) cache.request(k, 0);
+  cache.frame_end();  // frame 1's requests are pending, renewed in frame 1
+  cache.frame_begin();
+  const FrameReport r = cache.frame_end();  // not renewed in frame 2: whatever is still queued goes
+  cache.wait_idle();
+  const CacheStats s = cache.stats();
+  EXPECT_EQ(s.queue_length, 0u);
+  EXPECT_EQ(r.dropped, s.dropped_requests);
+  EXPECT_EQ(s.uploads + s.dropped_requests, keys.size());
+}
+
+TEST_F(BrickCacheTest, NeverExceedsItsBudgetsUnderConcurrentRandomLoad) {
+  const size_t brick = store_->format().bytes();
+  CacheConfig c = small_config(24, 40, brick);
+  c.l2_policy = "s3fifo";
+  c.l1_policy = "clock";
+  BrickCache cache(*store_, c);
+  const auto keys = finest_keys(*store_);
+  std::atomic<bool> done{false};
+  std::atomic<uint64_t> checks{0};
+  std::thread watcher([&] {
+    while (!done) {
+      const CacheStats s = cache.stats();
+      EXPECT_LE(s.l1.resident, 24u);
+      EXPECT_LE(s.l2.resident, 40 * brick);
+      checks++;
+    }
+  });
+  std::vector<std::thread> workers;
+  for (int t = 0; t < 2; ++t)
+    workers.emplace_back([&, t] {
+      std::mt19937 rng{static_cast<uint32_t>(t)};
+      for (int i = 0; i < 3000; ++i) {
+        const BrickKey& k = keys[rng() % keys.size()];
+        if (i % 3 == 0) {
+          BrickHandle h = cache.fetch(k);
+          EXPECT_TRUE(h.resident());
+          EXPECT_EQ(h.bytes()[0], decoded(*store_, k)[0]);
+        } else {
+          BrickHandle h = cache.lookup(k, float(i));
+          if (h.resident()) cache.mark_used(k);
+        }
+      }
+    });
+  for (int f = 0; f < 20; ++f) {
+    cache.frame_begin();
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    cache.frame_end();
+  }
+  for (auto& w : workers) w.join();
+  cache.wait_idle();
+  done = true;
+  watcher.join();
+  const CacheStats s = cache.stats();
+  EXPECT_GT(checks.load(), 0u);
+  EXPECT_LE(s.l2_peak_bytes, 40 * brick);
+  EXPECT_LE(s.l1.resident, 24u);
+  EXPECT_GT(s.l1.evictions, 0u);
+  EXPECT_GT(s.l2.evictions, 0u);
+}
+
+TEST_F(BrickCacheTest, VisibilityMarksAppearAfterTheFrame) {
+  BrickCache cache(*store_, small_config(8, 8, store_->format().bytes()));
+  const BrickKey k{1, 0, 1, 0};
+  cache.frame_begin();
+  cache.mark_visible(k, true);
+  EXPECT_FALSE(cache.visibility(k).has_value());
+  cache.frame_end();
+  EXPECT_EQ(cache.visibility(k), std::optional<bool>(true));
+  cache.frame_begin();
+  cache.mark_visible(k, false);
+  cache.frame_end();
+  EXPECT_EQ(cache.visibility(k), std::optional<bool>(false));
+}
+
+TEST_F(BrickCacheTest, LruFrameProtectsBricksUsedThisFrame) {
+  CacheConfig c = small_config(16, 64, store_->format().bytes());
+  c.l1_policy = "lru-frame";
+  BrickCache cache(*store_, c);
+  const auto keys = finest_keys(*store_);
+  cache.frame_begin();
+  for (int i = 0; i < 16; ++i) cache.fetch(keys[size_t(i)]);  // fill the pool in this frame
+  BrickHandle h = cache.fetch(keys[16]);  // nothing evictable: every slot was used this frame
+  EXPECT_EQ(h.slot(), kNoSlot);
+  cache.frame_end();
+  cache.frame_begin();
+  cache.mark_used(keys[0]);
+  BrickHandle next = cache.fetch(keys[17]);
+  EXPECT_NE(next.slot(), kNoSlot);
+  EXPECT_TRUE(cache.lookup(keys[0], 0, false).resident());   // used this frame: kept
+  EXPECT_FALSE(cache.lookup(keys[1], 0, false).resident());  // the least recent of the rest
+}
+
+TEST_F(BrickCacheTest, KeysOutsideTheStoreAreClearErrors) {
+  BrickCache cache(*store_, small_config(8, 8, store_->format().bytes()));
+  const BrickKey outside{9, 0, 0, 0};
+  BrickHandle h = cache.lookup(outside);
+  EXPECT_TRUE(h.failed());
+  EXPECT_NE(h.error().find("outside the store"), std::string::npos) << h.error();
+  try {
+    cache.fetch(outside);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::not_found);
+    EXPECT_EQ(e.key(), outside.to_string());
+  }
+}
+
+TEST_F(BrickCacheTest, BudgetsSmallerThanOneBrickAreConfigurationErrors) {
+  CacheConfig c;
+  c.l1_bytes = 100;
+  try {
+    BrickCache cache(*store_, c);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::invalid_argument);
+    EXPECT_EQ(e.field(), "l1_bytes");
+  }
+  c = CacheConfig{};
+  c.l2_bytes = 100;
+  try {
+    BrickCache cache(*store_, c);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.field(), "l2_bytes");
+  }
+  c = CacheConfig{};
+  c.l1_policy = "opt";
+  EXPECT_THROW(BrickCache(*store_, c), Error);
+}
+
+TEST_F(BrickCacheTest, ShutdownWithRequestsInFlightIsClean) {
+  const auto keys = finest_keys(*store_);
+  for (int round = 0; round < 5; ++round) {
+    CacheConfig c = small_config(32, 32, store_->format().bytes());
+    c.upload_bricks_per_frame = 3;
+    BrickCache cache(*store_, c);
+    cache.frame_begin();
+    for (const auto& k : keys) cache.request(k, 1);
+    cache.frame_end();
+    // Destroyed with most requests queued, some decoding, some waiting for budget.
+  }
+}
+
+TEST_F(BrickCacheTest, RecordsATraceOfEveryAccess) {
+  testing::TempDir dir;
+  const auto keys = finest_keys(*store_);
+  {
+    CacheConfig c = small_config(8, 16, store_->format().bytes());
+    c.trace_path = dir.file("t.bytrace");
+    BrickCache cache(*store_, c);
+    cache.frame_begin();
+    cache.lookup(keys[0]);
+    cache.wait_idle();
+    cache.frame_end();
+    cache.frame_begin();
+    cache.lookup(keys[0]);
+    cache.fetch(keys[1]);
+    cache.frame_end();
+  }
+  const Trace t = read_trace(dir.file("t.bytrace"));
+  std::vector<AccessKind> kinds;
+  for (const auto& r : t.records) kinds.push_back(r.kind);
+  EXPECT_EQ(kinds, (std::vector<AccessKind>{AccessKind::demand, AccessKind::prefetch_request, AccessKind::prefetch_fill,
+                                            AccessKind::demand, AccessKind::blocking}));
+  EXPECT_EQ(t.records[0].hit_level, 0);
+  EXPECT_EQ(t.records[3].hit_level, 1);
+  EXPECT_EQ(t.records[4].hit_level, 3);
+  EXPECT_EQ(t.records[3].frame, 2u);
+  EXPECT_EQ(t.records[0].key, keys[0].code());
+}
+
+class CorruptStoreTest : public ::testing::Test {};
+
+TEST_F(CorruptStoreTest, ACorruptBrickFailsOnceAndOthersStillLoad) {
+  testing::TempDir dir;
+  BuildOptions o;
+  o.brick_size = 8;
+  auto src = make_field_source(make_field("fbm"), {32, 32, 32}, ValueType::u8);
+  build_store(*src, dir.file("s"), o);
+  // Damage one record inside LMDB's file.
+  const std::string header = testing::corrupt_first_brick(dir.file("s/data.mdb"), 30, 16);
+  ASSERT_EQ(header.size(), 28u);
+  BrickHeader h{};
+  std::memcpy(&h, header.data(), header.size());
+  const BrickKey bad{h.level, h.x, h.y, h.z};
+
+  BrickStore store(dir.file("s"));
+  CacheConfig c = small_config(64, 64, store.format().bytes());
+  BrickCache cache(store, c);
+  cache.frame_begin();
+  const BrickKey good = bad.x > 0 ? BrickKey{bad.level, bad.x - 1, bad.y, bad.z} : BrickKey{bad.level, bad.x + 1, bad.y, bad.z};
+  cache.lookup(bad);
+  cache.lookup(good);
+  cache.wait_idle();
+  BrickHandle hb = cache.lookup(bad);
+  EXPECT_TRUE(hb.failed());
+  EXPECT_NE(hb.error().find(bad.to_string()), std::string::npos) << hb.error();
+  EXPECT_TRUE(cache.lookup(good).resident() || store.nodes().at(good).is_constant());
+  const uint64_t reads = cache.stats().l3.hits;
+  for (int i = 0; i < 10; ++i) cache.request(bad, 5);  // never retried
+  cache.wait_idle();
+  EXPECT_EQ(cache.stats().l3.hits, reads);
+  EXPECT_EQ(cache.stats().failed_keys, 1u);
+  try {
+    cache.fetch(bad);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::corrupt);
+  }
+}
+
+TEST(NodePool, AllocatesEvictsLeastRecentlyUsedAndRespectsPins) {
+  NodePool pool(4, 64);
+  for (uint64_t id = 0; id < 4; ++id) {
+    const uint32_t s = pool.allocate(id);
+    ASSERT_NE(s, kNoSlot);
+    std::memset(pool.data(s), int(id), 64);
+    pool.publish(s);
+  }
+  const uint32_t s0 = pool.lookup(0);  // pin 0, and make it recent
+  ASSERT_NE(s0, kNoSlot);
+  EXPECT_EQ(pool.data(s0)[10], std::byte{0});
+  std::optional<uint64_t> evicted;
+  const uint32_t s4 = pool.allocate(4, &evicted);
+  ASSERT_NE(s4, kNoSlot);
+  EXPECT_EQ(evicted, std::optional<uint64_t>(1));
+  pool.publish(s4);
+  EXPECT_EQ(pool.lookup(1), kNoSlot);
+  pool.unpin(s0);
+  EXPECT_EQ(pool.resident(), 4u);
+  EXPECT_EQ(pool.counters().evictions, 1u);
+}
+
+}  // namespace
+}  // namespace brickyard

@@ -1,0 +1,237 @@
+// End-to-end tests of import, info, verify and export, as a user runs them.
+
+#include <gtest/gtest.h>
+
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <thread>
+#include <vector>
+
+#include "preprocess/builder_test_util.h"
+#include "storage/brick_store.h"
+#include "storage/lmdb_env.h"
+#include "test_util.h"
+
+extern char** environ;
+
+namespace brickyard {
+namespace {
+
+const std::string kExe = BRICKYARD_EXE;
+
+testing::CommandResult brickyard(const std::string& args) { return testing::run_command(kExe + " " + args); }
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+void write_floats(const std::string& path, const std::vector<float>& v) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * 4));
+}
+
+TEST(CliStore, ImportInfoVerifyExportRoundTrip) {
+  testing::TempDir dir;
+  ASSERT_EQ(brickyard("-q generate gyroid --size 70,50,40 --type u16 --out " + dir.file("g.raw")).exit_code, 0);
+  auto r = brickyard("import " + dir.file("g.raw") + " --out " + dir.file("s") + " --brick-size 16");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "70x50x40 u16")) << r.output;
+  EXPECT_TRUE(contains(r.output, "import g.raw: 140k voxels in")) << r.output;
+
+  r = brickyard("info " + dir.file("s"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* part : {": complete, format version 1", "volume 70x50x40 u16", "bricks 16^3 + apron 1, lz4 after byte-shuffle",
+                           "4 levels", "level", "constant", "ratio", "histogram [", "quantiles p1", "\"kind\":\"raw\""})
+    EXPECT_TRUE(contains(r.output, part)) << part << " missing from\n" << r.output;
+  r = brickyard("info --json " + dir.file("s"));
+  EXPECT_TRUE(contains(r.output, "\"complete\": true")) << r.output;
+
+  r = brickyard("verify " + dir.file("s"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "0 problems")) << r.output;
+
+  r = brickyard("export " + dir.file("s") + " --out " + dir.file("back.raw"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(testing::read_file(dir.file("back.raw")), testing::read_file(dir.file("g.raw")));
+  r = brickyard("export " + dir.file("s") + " --level 1 --box 1,2,3,9,8,7 --out " + dir.file("box.raw"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(std::filesystem::file_size(dir.file("box.raw")), size_t(8 * 6 * 4 * 2));
+  r = brickyard("export " + dir.file("s") + " --level 7 --out " + dir.file("x.raw"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.output, "level 7 does not exist (the store has levels 0 to 3)")) << r.output;
+
+  // Same command again: nothing to do. Other parameters: refused without --force.
+  r = brickyard("import " + dir.file("g.raw") + " --out " + dir.file("s") + " --brick-size 16");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_TRUE(contains(r.output, "complete and up to date")) << r.output;
+  r = brickyard("import " + dir.file("g.raw") + " --out " + dir.file("s") + " --brick-size 32");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.output, "pass --force")) << r.output;
+}
+
+TEST(CliStore, ImportsProceduralFieldsDirectly) {
+  testing::TempDir dir;
+  auto r = brickyard("-q import field:sparse-blobs --size 64 --type u8 --out " + dir.file("s"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = brickyard("info " + dir.file("s"));
+  EXPECT_TRUE(contains(r.output, "\"field\":\"sparse-blobs\"")) << r.output;
+  EXPECT_EQ(brickyard("verify " + dir.file("s")).exit_code, 0);
+}
+
+struct BadImport {
+  const char* name;
+  const char* setup;  // raw file content kind
+  const char* args;
+  const char* message;
+};
+
+class CliImportRejects : public ::testing::TestWithParam<BadImport> {};
+
+TEST_P(CliImportRejects, WithAClearMessageAndNoCompleteStore) {
+  testing::TempDir dir;
+  std::ofstream(dir.file("v.raw"), std::ios::binary) << std::string(1000, '\x01');
+  std::string args = GetParam().args;
+  for (const std::string ph : {"RAW", "OUT", "DIR"}) {
+    const std::string value = ph == "RAW" ? dir.file("v.raw") : ph == "OUT" ? dir.file("s") : dir.path().string();
+    for (size_t at; (at = args.find(ph)) != std::string::npos;) args.replace(at, ph.size(), value);
+  }
+  auto r = brickyard(args);
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, GetParam().message)) << "expected '" << GetParam().message << "' in:\n" << r.output;
+  EXPECT_NE(probe_store(dir.file("s")), StoreState::complete);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Import, CliImportRejects,
+    ::testing::Values(
+        BadImport{"truncated", "", "import RAW --dims 10,10,20 --type u8 --out OUT", "file is truncated: 1000 bytes, but 10x10x20 u8 needs 2000"},
+        BadImport{"too_long", "", "import RAW --dims 10,10,5 --type u8 --out OUT", "larger than its dims say"},
+        BadImport{"dims_overflow", "", "import RAW --dims 4000000000,4000000000,4000000000 --type u16 --out OUT", "overflow a 64-bit byte count"},
+        BadImport{"unknown_type", "", "import RAW --dims 10,10,10 --type i32 --out OUT", "unknown value type 'i32'"},
+        BadImport{"no_description", "", "import RAW --out OUT", "needs --dims and --type, or a sidecar"},
+        BadImport{"missing_file", "", "import DIR/nothing.raw --dims 4 --type u8 --out OUT", "nothing.raw: cannot open"},
+        BadImport{"bad_codec", "", "import RAW --dims 10 --type u8 --codec zstd --out OUT", "unknown codec 'zstd'"},
+        BadImport{"bad_brick_size", "", "import RAW --dims 10 --type u8 --brick-size 24 --out OUT", "not a power of two in [8, 128]"},
+        BadImport{"bad_range", "", "import RAW --dims 10 --type u8 --range 5,1 --out OUT", "'5,1' is not LO,HI"},
+        BadImport{"not_a_vdb", "", "import RAW.vdb --out OUT", "v.raw.vdb"},
+        BadImport{"full_map", "", "import field:fbm --size 96 --type f32 --map-size 256KiB --no-map-growth --out OUT", "store is full"}),
+    [](const auto& param_info) { return std::string(param_info.param.name); });
+
+TEST(CliStore, NonFiniteVoxelsAreRejectedOrRepaired) {
+  testing::TempDir dir;
+  std::vector<float> v(8 * 8 * 8, 1.0f);
+  v[3 + 8 * (2 + 8 * 1)] = std::numeric_limits<float>::quiet_NaN();  // (3, 2, 1)
+  v[100] = std::numeric_limits<float>::infinity();
+  v[200] = 5.0f;
+  v[300] = -2.0f;
+  write_floats(dir.file("n.raw"), v);
+  const std::string base = "import " + dir.file("n.raw") + " --dims 8 --type f32 --brick-size 8 ";
+  auto r = brickyard(base + "--out " + dir.file("s"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.output, "2 non-finite voxels (NaN or infinity), the first at (3, 2, 1)")) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("s")));  // rejected before anything was written
+
+  ASSERT_EQ(brickyard(base + "--nonfinite zero --out " + dir.file("z")).exit_code, 0);
+  ASSERT_EQ(brickyard("-q export " + dir.file("z") + " --out " + dir.file("z.raw")).exit_code, 0);
+  std::vector<float> z(v.size());
+  std::ifstream(dir.file("z.raw"), std::ios::binary).read(reinterpret_cast<char*>(z.data()), std::streamsize(z.size() * 4));
+  EXPECT_EQ(z[3 + 8 * (2 + 8 * 1)], 0.0f);
+  EXPECT_EQ(z[100], 0.0f);
+  EXPECT_EQ(z[200], 5.0f);
+
+  ASSERT_EQ(brickyard(base + "--nonfinite clamp --out " + dir.file("c")).exit_code, 0);
+  ASSERT_EQ(brickyard("-q export " + dir.file("c") + " --out " + dir.file("c.raw")).exit_code, 0);
+  std::ifstream(dir.file("c.raw"), std::ios::binary).read(reinterpret_cast<char*>(z.data()), std::streamsize(z.size() * 4));
+  EXPECT_EQ(z[100], 5.0f);  // +inf -> the largest finite value
+  EXPECT_EQ(z[3 + 8 * (2 + 8 * 1)], 0.0f);
+}
+
+TEST(CliStore, DirectoriesThatAreNotStoresAndNewerFormatsAreRefused) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir.file("plain"));
+  auto r = brickyard("info " + dir.file("plain"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.output, "plain: not a brickyard store (no data.mdb)")) << r.output;
+  r = brickyard("verify " + dir.file("missing"));
+  EXPECT_TRUE(contains(r.output, "missing: no such store")) << r.output;
+
+  ASSERT_EQ(brickyard("-q import field:sphere --size 16 --type u8 --out " + dir.file("s")).exit_code, 0);
+  {
+    lmdb::Env env(dir.file("s"), {});
+    auto db = env.open_database(kManifestDb, false);
+    std::string text;
+    {
+      lmdb::ReadTxn txn(env);
+      auto v = txn.get(db, lmdb::as_bytes("manifest"));
+      text.assign(reinterpret_cast<const char*>(v->data()), v->size());
+    }
+    text.replace(text.find("\"format_version\": 1"), 19, "\"format_version\": 99");
+    lmdb::BatchWriter w(env);
+    w.put(db, lmdb::as_bytes("manifest"), lmdb::as_bytes(text));
+    w.commit();
+  }
+  r = brickyard("info " + dir.file("s"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.output, "store format version 99 is newer than this build reads (1)")) << r.output;
+}
+
+TEST(CliStore, VerifyNamesACorruptedBrick) {
+  testing::TempDir dir;
+  ASSERT_EQ(brickyard("-q import field:fbm --size 40 --type u8 --brick-size 16 --out " + dir.file("s")).exit_code, 0);
+  // Flip bytes inside one brick's payload, in LMDB's data file, behind the library's back.
+  const std::string header = testing::corrupt_first_brick(dir.file("s/data.mdb"), 40, 8);
+  ASSERT_EQ(header.size(), 28u);
+  BrickHeader h{};
+  std::memcpy(&h, header.data(), header.size());
+  auto r = brickyard("verify " + dir.file("s"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  const std::string key = BrickKey{h.level, h.x, h.y, h.z}.to_string();
+  EXPECT_TRUE(contains(r.output, "BAD " + key + ": ")) << key << " not named in:\n" << r.output;
+  EXPECT_TRUE(contains(r.output, "1 problems")) << r.output;
+}
+
+TEST(CliStore, KilledImportLeavesAnIncompleteStoreAndTheRerunEqualsACleanBuild) {
+  testing::TempDir dir;
+  const std::string store = dir.file("s");
+  const std::vector<std::string> args = {kExe, "-q", "import", "field:fbm", "--size", "256", "--type", "u8",
+                                         "--brick-size", "16", "--out", store};
+  std::vector<char*> argv;
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  ASSERT_EQ(posix_spawn(&pid, kExe.c_str(), nullptr, nullptr, argv.data(), environ), 0);
+  // Kill it as soon as the store exists and holds something: mid-build.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  std::error_code ec;
+  while (std::chrono::steady_clock::now() < deadline &&
+         !(std::filesystem::exists(store + "/data.mdb", ec) && std::filesystem::file_size(store + "/data.mdb", ec) > 64 * 1024))
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ::kill(pid, SIGKILL);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "the import finished before it could be interrupted";
+
+  auto r = brickyard("info " + store);
+  EXPECT_TRUE(contains(r.output, "INCOMPLETE")) << r.output;
+  r = brickyard("verify " + store);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.output, "INCOMPLETE")) << r.output;
+  r = brickyard("export " + store + " --out " + dir.file("x.raw"));
+  EXPECT_TRUE(contains(r.output, "the store is incomplete")) << r.output;
+
+  std::string rerun;
+  for (size_t i = 1; i < args.size(); ++i) rerun += args[i] + " ";
+  r = brickyard(rerun);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "interrupted earlier build was discarded and rebuilt")) << r.output;
+  ASSERT_EQ(brickyard("-q import field:fbm --size 256 --type u8 --brick-size 16 --out " + dir.file("clean")).exit_code, 0);
+  EXPECT_TRUE(testing::all_records(BrickStore(store)) == testing::all_records(BrickStore(dir.file("clean"))));
+}
+
+}  // namespace
+}  // namespace brickyard

@@ -1,0 +1,345 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+
+#include <tbb/task_arena.h>
+
+#include "builder_test_util.h"
+#include "core/error.h"
+#include "core/raw_volume.h"
+#include "preprocess/builder.h"
+#include "preprocess/volume_source.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+using testing::Grid;
+
+BuildOptions small_bricks(int m = 8, int apron = 1) {
+  BuildOptions o;
+  o.brick_size = m;
+  o.apron = apron;
+  return o;
+}
+
+template <typename T>
+void expect_pyramid_matches(const std::string& field_name, const Vec3s& dims, const BuildOptions& options) {
+  testing::TempDir dir;
+  auto field = make_field(field_name);
+  auto source = make_field_source(make_field(field_name), dims, ValueTypeOf<T>::value);
+  build_store(*source, dir.file("s"), options);
+  BrickStore store(dir.file("s"));
+  Grid<T> expected = testing::sample<T>(*field, dims);
+  for (int level = store.layout().finest(); level >= 0; --level) {
+    const Grid<T> got = testing::read_level<T>(store, level);
+    ASSERT_EQ(got.dims, expected.dims) << "level " << level;
+    ASSERT_TRUE(got.v == expected.v) << field_name << " level " << level << " differs from the reference pyramid";
+    if (level > 0) expected = testing::halve(expected);
+  }
+}
+
+TEST(Builder, EveryLevelEqualsTheReferencePyramid) {
+  expect_pyramid_matches<uint8_t>("sphere", {40, 37, 29}, small_bricks());
+  expect_pyramid_matches<uint16_t>("gyroid", {33, 16, 17}, small_bricks(16, 2));
+  expect_pyramid_matches<float>("marschner-lobb", {24, 24, 24}, small_bricks(8, 0));
+}
+
+TEST(Builder, ApronsReplicateNeighboursAndNodeRangesCoverTrilinearCells) {
+  testing::TempDir dir;
+  const Vec3s dims{30, 21, 19};
+  auto source = make_field_source(make_field("fbm"), dims, ValueType::u16);
+  build_store(*source, dir.file("s"), small_bricks(8, 2));
+  BrickStore store(dir.file("s"));
+  const StoreLayout& l = store.layout();
+  const BrickFormat& f = store.format();
+  std::vector<std::byte> buffer(f.bytes());
+  for (int level = 0; level < l.levels; ++level) {
+    const Grid<uint16_t> g = testing::read_level<uint16_t>(store, level);
+    for (int64_t i = 0; i < l.brick_count(level); ++i) {
+      const BrickKey k = l.key_at(level, i);
+      store.read_brick(k, buffer);
+      const auto* v = reinterpret_cast<const uint16_t*>(buffer.data());
+      const int e = f.edge(), m = f.brick_size, a = f.apron;
+      for (int z = 0; z < e; ++z)
+        for (int y = 0; y < e; ++y)
+          for (int x = 0; x < e; ++x)
+            ASSERT_EQ(v[(z * e + y) * e + x],
+                      g.at(int64_t(k.x) * m - a + x, int64_t(k.y) * m - a + y, int64_t(k.z) * m - a + z))
+                << k << " at " << x << "," << y << "," << z;
+      // Node range: over voxels [b*M, (b+1)*M] clamped to the level, forward neighbours included.
+      uint16_t lo = 65535, hi = 0;
+      const int64_t bx = k.x, by = k.y, bz = k.z;
+      for (int64_t z = bz * m; z <= std::min<int64_t>((bz + 1) * m, g.dims.z - 1); ++z)
+        for (int64_t y = by * m; y <= std::min<int64_t>((by + 1) * m, g.dims.y - 1); ++y)
+          for (int64_t x = bx * m; x <= std::min<int64_t>((bx + 1) * m, g.dims.x - 1); ++x) {
+            lo = std::min(lo, g.at(x, y, z));
+            hi = std::max(hi, g.at(x, y, z));
+          }
+      EXPECT_EQ(store.nodes().at(k).min, lo) << k;
+      EXPECT_EQ(store.nodes().at(k).max, hi) << k;
+    }
+  }
+}
+
+TEST(Builder, ConstantBricksHaveNoPayloadAndBackgroundOnesAreEmpty) {
+  testing::TempDir dir;
+  auto source = make_field_source(make_field("sparse-blobs"), {64, 64, 64}, ValueType::u8);
+  const BuildResult r = build_store(*source, dir.file("s"), small_bricks());
+  BrickStore store(dir.file("s"));
+  const StoreLayout& l = store.layout();
+  auto txn = store.begin_read();
+  int64_t constant = 0, empty = 0, stored = 0;
+  for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
+    const BrickKey k = l.key_at(l.finest(), i);
+    const NodeRecord& n = store.nodes().at(k);
+    EXPECT_TRUE(n.flags & kNodeFinest);
+    EXPECT_FALSE(n.flags & kNodeHasChildren);
+    if (n.is_constant()) {
+      ++constant;
+      EXPECT_FALSE(store.record(txn, k).has_value()) << k;
+      EXPECT_EQ(n.min, n.constant);
+      EXPECT_EQ(n.max, n.constant);
+      if (n.is_empty()) {
+        ++empty;
+        EXPECT_EQ(n.constant, 0.0f);
+      }
+    } else {
+      ++stored;
+      EXPECT_TRUE(store.record(txn, k).has_value()) << k;
+    }
+  }
+  EXPECT_GT(empty, l.brick_count(l.finest()) / 2);  // mostly empty space
+  EXPECT_GT(stored, 0);
+  EXPECT_EQ(r.manifest.stats[size_t(l.finest())].constant, constant);
+  EXPECT_EQ(r.manifest.stats[size_t(l.finest())].empty, empty);
+  EXPECT_EQ(store.record_count(), uint64_t(l.total_bricks() - [&] {
+              int64_t c = 0;
+              for (const auto& s : r.manifest.stats) c += s.constant;
+              return c;
+            }()));
+}
+
+TEST(Builder, ManifestDescribesTheVolume) {
+  testing::TempDir dir;
+  auto field = make_field("sphere");
+  auto source = make_field_source(make_field("sphere"), {50, 40, 30}, ValueType::u8);
+  const BuildResult r = build_store(*source, dir.file("s"), small_bricks(16));
+  const Manifest m = BrickStore(dir.file("s")).manifest();
+  EXPECT_TRUE(m.complete);
+  EXPECT_EQ(m.dims, Vec3s(50, 40, 30));
+  EXPECT_EQ(m.levels, 3);
+  EXPECT_EQ(m.format.brick_size, 16);
+  const Grid<uint8_t> g = testing::sample<uint8_t>(*field, {50, 40, 30});
+  EXPECT_EQ(m.min_value, *std::min_element(g.v.begin(), g.v.end()));
+  EXPECT_EQ(m.max_value, *std::max_element(g.v.begin(), g.v.end()));
+  EXPECT_EQ(m.histogram.total(), uint64_t(50 * 40 * 30));
+  EXPECT_EQ(m.histogram.counts.size(), 256u);
+  EXPECT_EQ(m.spacing, GridSampler(*field, {50, 40, 30}, ValueType::u8).spacing());
+  EXPECT_NE(m.source.find("\"field\":\"sphere\""), std::string::npos) << m.source;
+  EXPECT_NE(m.build.find("\"brick_size\":16"), std::string::npos) << m.build;
+  EXPECT_EQ(r.manifest.to_json(), m.to_json());
+}
+
+TEST(Builder, RawFileRoundTripsBitExactlyThroughTheStore) {
+  testing::TempDir dir;
+  auto field = make_field("torus");
+  GridSampler sampler(*field, {45, 23, 31}, ValueType::u16);
+  const RawVolumeInfo info = write_raw_grid(sampler, dir.file("t.raw"));
+  RawFileSpec spec;
+  spec.dims = info.dims;
+  spec.type = info.type;
+  auto source = open_raw_source(dir.file("t.raw"), spec);
+  build_store(*source, dir.file("s"), small_bricks(16));
+  BrickStore store(dir.file("s"));
+  const RawVolumeInfo out = export_raw(store, store.layout().finest(), export_region(store, store.layout().finest(), {}),
+                                       dir.file("back.raw"));
+  EXPECT_EQ(testing::read_file(dir.file("back.raw")), testing::read_file(dir.file("t.raw")));
+  EXPECT_EQ(out.xxh3_64, info.xxh3_64);
+  // A box of the finest level equals the same box cut from the source.
+  const VoxelBox box{{3, 4, 5}, {40, 9, 30}};
+  export_raw(store, store.layout().finest(), export_region(store, store.layout().finest(), box), dir.file("box.raw"));
+  const std::string all = testing::read_file(dir.file("t.raw")), part = testing::read_file(dir.file("box.raw"));
+  ASSERT_EQ(part.size(), size_t(37 * 5 * 25 * 2));
+  size_t at = 0;
+  for (int64_t z = 5; z < 30; ++z)
+    for (int64_t y = 4; y < 9; ++y, at += 37 * 2) EXPECT_EQ(part.substr(at, 74), all.substr(size_t(((z * 23 + y) * 45 + 3) * 2), 74));
+  EXPECT_THROW(export_region(store, 0, VoxelBox{{0, 0, 0}, {100, 1, 1}}), Error);
+  EXPECT_THROW(export_region(store, 9, std::nullopt), Error);
+}
+
+TEST(Builder, BigEndianRawAndHeaderBytesAreHonoured) {
+  testing::TempDir dir;
+  const Vec3s dims{9, 8, 7};
+  std::string bytes = "HEADER--";
+  std::vector<uint16_t> values;
+  for (int i = 0; i < 9 * 8 * 7; ++i) {
+    values.push_back(uint16_t(i * 97));
+    bytes += char(values.back() >> 8);
+    bytes += char(values.back() & 0xff);
+  }
+  std::ofstream(dir.file("be.raw"), std::ios::binary) << bytes;
+  RawFileSpec spec;
+  spec.dims = dims;
+  spec.type = ValueType::u16;
+  spec.little_endian = false;
+  spec.header_bytes = 8;
+  auto source = open_raw_source(dir.file("be.raw"), spec);
+  build_store(*source, dir.file("s"), small_bricks());
+  const Grid<uint16_t> g = testing::read_level<uint16_t>(BrickStore(dir.file("s")), 1);
+  EXPECT_EQ(g.v, values);
+}
+
+TEST(Builder, OptionsChangeEncodingButNotDecodedData) {
+  auto build = [](const BuildOptions& o, testing::TempDir& dir) {
+    auto source = make_field_source(make_field("marschner-lobb"), {33, 33, 33}, ValueType::f32);
+    build_store(*source, dir.file("s"), o);
+    return testing::read_level<float>(BrickStore(dir.file("s")), 2).v;
+  };
+  testing::TempDir a, b, c;
+  BuildOptions hc = small_bricks(16);
+  hc.codec = Codec::lz4hc;
+  BuildOptions plain = small_bricks(16);
+  plain.shuffle = false;
+  const auto reference = build(small_bricks(16), a);
+  EXPECT_EQ(build(hc, b), reference);
+  EXPECT_EQ(build(plain, c), reference);
+}
+
+TEST(Builder, MinAndMaxFiltersPreserveExtremes) {
+  testing::TempDir dir;
+  BuildOptions o = small_bricks();
+  o.downsample = Downsample::max;
+  auto field = make_field("menger", {{"levels", 3}});
+  auto source = make_field_source(make_field("menger", {{"levels", 3}}), {27, 27, 27}, ValueType::u8);
+  build_store(*source, dir.file("s"), o);
+  BrickStore store(dir.file("s"));
+  const Grid<uint8_t> fine = testing::read_level<uint8_t>(store, store.layout().finest());
+  const Grid<uint8_t> coarse = testing::read_level<uint8_t>(store, store.layout().finest() - 1);
+  for (int64_t z = 0; z < coarse.dims.z; ++z)
+    for (int64_t y = 0; y < coarse.dims.y; ++y)
+      for (int64_t x = 0; x < coarse.dims.x; ++x) {
+        uint8_t m = 0;
+        for (int d = 0; d < 8; ++d)
+          m = std::max(m, fine.at(std::min(2 * x + (d & 1), fine.dims.x - 1), std::min(2 * y + ((d >> 1) & 1), fine.dims.y - 1),
+                                  std::min(2 * z + (d >> 2), fine.dims.z - 1)));
+        ASSERT_EQ(coarse.at(x, y, z), m);
+      }
+}
+
+TEST(Builder, ClampRangeAndConstantTolerance) {
+  testing::TempDir dir;
+  BuildOptions o = small_bricks();
+  o.clamp = {{100.0, 150.0}};
+  auto source = make_field_source(make_field("sphere"), {32, 32, 32}, ValueType::u8);
+  const BuildResult r = build_store(*source, dir.file("s"), o);
+  EXPECT_GE(r.manifest.min_value, 100);
+  EXPECT_LE(r.manifest.max_value, 150);
+
+  BuildOptions loose = small_bricks();
+  loose.constant_tolerance = 255;
+  auto source2 = make_field_source(make_field("sphere"), {32, 32, 32}, ValueType::u8);
+  build_store(*source2, dir.file("t"), loose);
+  EXPECT_EQ(BrickStore(dir.file("t")).record_count(), 0u);  // everything within tolerance
+}
+
+TEST(Builder, ResultDoesNotDependOnThreadCount) {
+  testing::TempDir dir;
+  auto build = [&](int threads, const std::string& name) {
+    tbb::task_arena(threads).execute([&] {
+      auto source = make_field_source(make_field("fbm"), {48, 40, 36}, ValueType::u16);
+      build_store(*source, dir.file(name), small_bricks());
+    });
+    return testing::all_records(BrickStore(dir.file(name)));
+  };
+  EXPECT_TRUE(build(1, "one") == build(2, "two"));
+}
+
+class FailingSource final : public VolumeSource {
+ public:
+  explicit FailingSource(int64_t fail_at) : inner_(make_field_source(make_field("fbm"), {40, 40, 40}, ValueType::u8)), fail_at_(fail_at) {}
+  std::string name() const override { return "failing"; }
+  Vec3s dims() const override { return inner_->dims(); }
+  Vec3d spacing() const override { return inner_->spacing(); }
+  Vec3d origin() const override { return inner_->origin(); }
+  ValueType type() const override { return inner_->type(); }
+  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
+    if (z0 >= fail_at_) throw Error(Errc::io, "simulated read failure").with_file("failing");
+    inner_->read_slab(z0, z1, out);
+  }
+  std::string describe_json() const override { return inner_->describe_json(); }
+
+ private:
+  std::unique_ptr<VolumeSource> inner_;
+  int64_t fail_at_;
+};
+
+TEST(Builder, AnInterruptedBuildIsIncompleteAndTheNextRunRebuildsIdentically) {
+  testing::TempDir dir;
+  const std::string s = dir.file("s");
+  FailingSource failing(25);
+  EXPECT_THROW(build_store(failing, s, small_bricks()), Error);
+  EXPECT_EQ(probe_store(s), StoreState::incomplete);
+  try {
+    BrickStore store(s);
+    FAIL() << "opened an incomplete store";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("incomplete"), std::string::npos) << e.what();
+  }
+  FailingSource healthy(1 << 30);
+  const BuildResult r = build_store(healthy, s, small_bricks());
+  EXPECT_TRUE(r.rebuilt_incomplete);
+  auto source = make_field_source(make_field("fbm"), {40, 40, 40}, ValueType::u8);
+  build_store(*source, dir.file("clean"), small_bricks());
+  EXPECT_TRUE(testing::all_records(BrickStore(s)) == testing::all_records(BrickStore(dir.file("clean"))));
+  EXPECT_EQ(BrickStore(s).manifest().to_json(), BrickStore(dir.file("clean")).manifest().to_json());
+}
+
+TEST(Builder, RerunsAreIdempotentAndDifferentParametersNeedForce) {
+  testing::TempDir dir;
+  const std::string s = dir.file("s");
+  auto run = [&](BuildOptions o) {
+    auto source = make_field_source(make_field("sphere"), {20, 20, 20}, ValueType::u8);
+    return build_store(*source, s, o);
+  };
+  EXPECT_FALSE(run(small_bricks()).up_to_date);
+  EXPECT_TRUE(run(small_bricks()).up_to_date);
+  BuildOptions other = small_bricks(16);
+  EXPECT_THROW(run(other), Error);
+  other.force = true;
+  const BuildResult r = run(other);
+  EXPECT_FALSE(r.up_to_date);
+  EXPECT_EQ(BrickStore(s).format().brick_size, 16);
+}
+
+TEST(Builder, RefusesToOverwriteSomethingThatIsNotAStore) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir.file("precious"));
+  std::ofstream(dir.file("precious/thesis.tex")) << "do not delete";
+  auto source = make_field_source(make_field("sphere"), {8, 8, 8}, ValueType::u8);
+  EXPECT_THROW(build_store(*source, dir.file("precious"), small_bricks()), Error);
+  EXPECT_TRUE(std::filesystem::exists(dir.file("precious/thesis.tex")));
+}
+
+TEST(Builder, AFullMapWithoutGrowthFailsAndLeavesAnIncompleteStore) {
+  testing::TempDir dir;
+  BuildOptions o = small_bricks();
+  o.map_size = 512 << 10;
+  o.map_growth = false;
+  o.batch_bytes = 64 << 10;
+  auto source = make_field_source(make_field("fbm"), {96, 96, 96}, ValueType::f32);
+  try {
+    build_store(*source, dir.file("s"), o);
+    FAIL() << "a 3.4 MB volume fitted in 512 KiB";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::resource);
+    EXPECT_NE(std::string(e.what()).find("store is full"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(probe_store(dir.file("s")), StoreState::incomplete);
+}
+
+}  // namespace
+}  // namespace brickyard
