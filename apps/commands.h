@@ -15,5 +15,7 @@ void add_generate_command(CLI::App& app, const GlobalOptions& global);
 void add_version_command(CLI::App& app);
 /// @brief import, info, verify, export. verify sets exit_status (1 when it finds problems).
 void add_store_commands(CLI::App& app, int& exit_status);
+/// @brief cachebench.
+void add_cache_commands(CLI::App& app);
 
 }  // namespace brickyard::cli

@@ -1,0 +1,99 @@
+#include "cache/flight.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/timing.h"
+
+namespace brickyard {
+
+Box3d brick_world_box(const StoreLayout& layout, const Manifest& m, const BrickKey& key) {
+  const double scale = double(int64_t(1) << layout.steps(int(key.level)));
+  const double M = layout.brick_size;
+  Box3d box;
+  for (int a = 0; a < 3; ++a) {
+    const double lo = double(key.coords()[a]) * M * scale;
+    const double hi = std::min(double(layout.dims[a] - 1), (double(key.coords()[a]) + 1) * M * scale);
+    box.lo[a] = m.origin[a] + std::min(lo, hi) * m.spacing[a];
+    box.hi[a] = m.origin[a] + hi * m.spacing[a];
+  }
+  return box;
+}
+
+namespace {
+double distance_to(const Box3d& box, const Vec3d& p) {
+  const Vec3d d = max(max(box.lo - p, p - box.hi), Vec3d(0.0));
+  return length(d);
+}
+}  // namespace
+
+std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const FlightOptions& options,
+                             const std::function<void(const FlightFrame&)>& on_frame) {
+  const StoreLayout& layout = cache.layout();
+  const Manifest& manifest = cache.store().manifest();
+  const NodeTable& nodes = cache.nodes();
+  const Box3d world{manifest.origin, manifest.origin + manifest.spacing * Vec3d(layout.dims - Vec3s(1))};
+  const double voxel = max_component(manifest.spacing);
+  const int frames = options.frames > 0 ? options.frames : path.frames;
+  std::vector<FlightFrame> out;
+
+  struct Chosen {
+    BrickKey key;
+    double distance;
+    float priority;
+  };
+  std::vector<Chosen> chosen;
+  std::vector<BrickKey> stack;
+  uint64_t uploads_before = cache.stats().uploads;
+  for (int f = 0; f < frames; ++f) {
+    Stopwatch watch;
+    CameraPath scaled = path;
+    scaled.frames = frames;
+    const Camera cam = scaled.at(f).in_box(world);
+    FlightFrame report;
+    report.frame = f;
+    cache.frame_begin();
+
+    // Step 1: refine from the root: visible, non-constant nodes whose voxels look too large.
+    chosen.clear();
+    stack.assign(1, BrickKey{0, 0, 0, 0});
+    while (!stack.empty()) {
+      const BrickKey k = stack.back();
+      stack.pop_back();
+      ++report.nodes_visited;
+      const Box3d box = brick_world_box(layout, manifest, k);
+      if (!cam.may_see(box, path.width, path.height)) continue;
+      const NodeRecord& n = nodes.at(k);
+      if (n.is_constant()) continue;  // renderers integrate constant nodes analytically
+      const double d = distance_to(box, cam.eye);
+      const double pixels = cam.projected_pixels(voxel * double(int64_t(1) << layout.steps(int(k.level))), d, path.height);
+      if (pixels <= options.lod_ratio || int(k.level) == layout.finest()) {
+        chosen.push_back({k, d, float(pixels)});
+        continue;
+      }
+      for (int c = 0; c < 8; ++c) {
+        const BrickKey child = k.child(c);
+        if (layout.contains(child)) stack.push_back(child);
+      }
+    }
+    // Step 2: front to back, as a ray caster meets them.
+    std::sort(chosen.begin(), chosen.end(), [](const Chosen& a, const Chosen& b) { return a.distance < b.distance; });
+    for (const Chosen& c : chosen) {
+      BrickHandle h = cache.lookup(c.key, c.priority);
+      report.hits += h.ready();
+    }
+    report.bricks_used = chosen.size();
+    const FrameReport r = cache.frame_end();
+    report.requests = r.requests;
+    if (options.wait_for_loads) cache.wait_idle();
+    const uint64_t uploads = cache.stats().uploads;
+    report.uploads = uploads - uploads_before;
+    uploads_before = uploads;
+    report.seconds = watch.seconds();
+    out.push_back(report);
+    if (on_frame) on_frame(report);
+  }
+  return out;
+}
+
+}  // namespace brickyard

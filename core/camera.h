@@ -1,0 +1,48 @@
+#pragma once
+/// @file camera.h
+/// @brief Pinhole cameras and keyframed camera paths. Paths are written in coordinates
+/// normalised to a volume's bounding box ([0,1]^3), so one flight fits any dataset.
+
+#include <string>
+#include <vector>
+
+#include "core/math.h"
+
+namespace brickyard {
+
+/// @brief A look-at pinhole camera with a vertical field of view.
+struct Camera {
+  Vec3d eye{0.5, -1.5, 0.5};
+  Vec3d target{0.5, 0.5, 0.5};
+  Vec3d up{0, 0, 1};
+  double fov_degrees = 45;
+
+  /// @brief Orthonormal basis: forward (towards the target), right, and true up.
+  void basis(Vec3d& forward, Vec3d& right, Vec3d& true_up) const;
+  /// @brief Primary ray through pixel (px, py) of a width x height image (pixel centres at +0.5,
+  /// row 0 at the top); the direction is normalised.
+  Rayd ray(double px, double py, int width, int height) const;
+  /// @brief Size in pixels of an object of world size `size` at distance `distance`.
+  double projected_pixels(double size, double distance, int height) const;
+  /// @brief Whether a box may be visible: not entirely behind the eye or outside a side plane
+  /// of the view frustum (conservative).
+  bool may_see(const Box3d& box, int width, int height) const;
+  /// @brief Maps a camera from normalised volume coordinates into world coordinates.
+  Camera in_box(const Box3d& world) const;
+};
+
+/// @brief Keyframes interpolated with Catmull-Rom splines over `frames` frames.
+struct CameraPath {
+  std::vector<Camera> keyframes;
+  int frames = 1;
+  int width = 640, height = 480;
+
+  /// @brief Camera of frame f in [0, frames).
+  Camera at(int frame) const;
+  /// @brief Reads a path from JSON: {"frames": N, "image": {"width": W, "height": H},
+  /// "camera_path": {"fov_degrees": F, "keyframes": [{"eye": [x,y,z], "target": [...], "up": [...]}, ...]}}
+  /// or a single {"camera": {...}}. Errors name the file and the key.
+  static CameraPath load(const std::string& path);
+};
+
+}  // namespace brickyard
