@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/thread_stripe.h"
 #include "core/timing.h"
 #include "core/units.h"
 
@@ -31,11 +32,7 @@ uint64_t now_ns() {
 
 constexpr size_t kStripes = 16;
 
-size_t stripe_of_this_thread() {
-  static std::atomic<size_t> next{0};
-  thread_local size_t stripe = next.fetch_add(1) % kStripes;
-  return stripe;
-}
+size_t stripe_of_this_thread() { return thread_stripe(kStripes); }
 
 uint32_t slots_for(const CacheConfig& c, size_t brick_bytes) {
   const uint64_t slots = c.l1_slots ? c.l1_slots : c.l1_bytes / brick_bytes;
@@ -149,9 +146,10 @@ struct BrickCache::Impl {
     std::vector<BrickRequest> staged;
   };
   struct alignas(64) MarkStripe {
-    std::mutex mutex;
+    std::mutex mutex;  // guards visible
     std::vector<std::pair<uint64_t, bool>> visible;
-    uint64_t lookups = 0, hits = 0, constant_hits = 0;
+    // Counted on the hit path: relaxed atomics on a line that one thread mostly owns.
+    std::atomic<uint64_t> lookups{0}, hits{0}, constant_hits{0};
   };
 
   // Loader queue. queue_mutex guards heap, pending, in_flight, ready, failed, frame_requests
@@ -374,21 +372,15 @@ BrickHandle BrickCache::lookup(const BrickKey& key, float priority, bool request
   auto& stripe = m.mark_stripes[stripe_of_this_thread()];
   const NodeRecord& node = store_.nodes().at(key);
   if (node.is_constant()) {
-    {
-      std::lock_guard lock(stripe.mutex);
-      ++stripe.lookups;
-      ++stripe.hits;
-      ++stripe.constant_hits;
-    }
+    stripe.lookups.fetch_add(1, std::memory_order_relaxed);
+    stripe.hits.fetch_add(1, std::memory_order_relaxed);
+    stripe.constant_hits.fetch_add(1, std::memory_order_relaxed);
     return make_handle(key, BrickHandle::State::constant);
   }
   const uint64_t code = key.code();
   const uint32_t slot = slots_.lookup_and_pin(code);
-  {
-    std::lock_guard lock(stripe.mutex);
-    ++stripe.lookups;
-    stripe.hits += slot != kNoSlot;
-  }
+  stripe.lookups.fetch_add(1, std::memory_order_relaxed);
+  if (slot != kNoSlot) stripe.hits.fetch_add(1, std::memory_order_relaxed);
   if (m.trace) m.trace->add(key, uint32_t(m.frame.load()), uint32_t(brick_bytes_), AccessKind::demand, slot != kNoSlot ? 1 : 0);
   if (slot != kNoSlot) {
     BrickHandle h = make_handle(key, BrickHandle::State::resident);
@@ -588,8 +580,8 @@ FrameReport BrickCache::frame_end() {
       std::lock_guard lock(s.mutex);
       for (const auto& [code, visible] : s.visible) m.visibility[code] = visible;
       s.visible.clear();
-      report.lookups += s.lookups;
-      report.hits += s.hits;
+      report.lookups += s.lookups.exchange(0, std::memory_order_relaxed);
+      report.hits += s.hits.exchange(0, std::memory_order_relaxed);
     }
   }
   report.uploads = m.frame_uploads.load();
@@ -638,10 +630,7 @@ CacheStats BrickCache::stats() const {
   s.l3_bytes_read = m.l3_bytes_read.load();
   s.l3_bytes_decoded = m.l3_bytes_decoded.load();
   s.l3_decode_seconds = double(m.l3_decode_ns.load()) * 1e-9;
-  for (auto& stripe : const_cast<Impl&>(m).mark_stripes) {
-    std::lock_guard lock(stripe.mutex);
-    s.constant_hits += stripe.constant_hits;
-  }
+  for (const auto& stripe : m.mark_stripes) s.constant_hits += stripe.constant_hits.load(std::memory_order_relaxed);
   {
     std::lock_guard lock(m.queue_mutex);
     s.requests = m.requests;
