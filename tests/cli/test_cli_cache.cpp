@@ -1,0 +1,98 @@
+// End-to-end tests of cachebench and flight.
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "cache/trace.h"
+#include "core/image.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+const std::string kExe = BRICKYARD_EXE;
+testing::CommandResult brickyard(const std::string& args) { return testing::run_command(kExe + " " + args); }
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+TEST(CliCache, CachebenchShowsLrusCollapseOnALoopNextToOpt) {
+  testing::TempDir dir;
+  auto r = brickyard("cachebench --synthetic loop:objects=1000,passes=5 --policies lru,sieve,opt --sizes 50% --csv " +
+                     dir.file("r.csv"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "lru            1.0000")) << r.output;
+  EXPECT_TRUE(contains(r.output, "best online policy against OPT")) << r.output;
+  const std::string csv = testing::read_file(dir.file("r.csv"));
+  EXPECT_TRUE(contains(csv, "policy,size_fraction,capacity_bytes,requests,misses,miss_ratio")) << csv;
+  EXPECT_TRUE(contains(csv, "lru,0.5,500,5000,5000,1.000000")) << csv;
+  EXPECT_TRUE(contains(csv, "opt,0.5,500,5000,")) << csv;
+}
+
+TEST(CliCache, CachebenchDrawsTheMissRatioCurve) {
+  testing::TempDir dir;
+  auto r = brickyard("cachebench --synthetic zipf:objects=2000,requests=20000 --policies lru,s3fifo,opt --plot " +
+                     dir.file("mrc.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const ImageRGBA8 png = read_png(dir.file("mrc.png"));
+  EXPECT_EQ(png.width(), 900);
+  EXPECT_EQ(png.height(), 600);
+  EXPECT_TRUE(std::filesystem::exists(dir.file("mrc.png.csv")));
+}
+
+TEST(CliCache, TracesConvertBetweenFormatsAndReplayTheSame) {
+  testing::TempDir dir;
+  ASSERT_EQ(brickyard("cachebench --synthetic zipf:objects=500,requests=5000,size=4096 --convert " + dir.file("t.bytrace")).exit_code, 0);
+  ASSERT_EQ(brickyard("cachebench " + dir.file("t.bytrace") + " --convert " + dir.file("t.oracleGeneral") + " --to oracleGeneral").exit_code, 0);
+  ASSERT_EQ(brickyard("cachebench " + dir.file("t.oracleGeneral") + " --convert " + dir.file("t.txt") + " --to text").exit_code, 0);
+  const std::string args = " --policies lru,arc --sizes 10%,30%";
+  auto a = brickyard("cachebench " + dir.file("t.bytrace") + args);
+  auto b = brickyard("cachebench " + dir.file("t.oracleGeneral") + args);
+  auto c = brickyard("cachebench " + dir.file("t.txt") + args);
+  ASSERT_EQ(a.exit_code, 0) << a.output;
+  auto table = [](const std::string& out) { return out.substr(out.find("miss ratio"), out.find("per policy") - out.find("miss ratio")); };
+  EXPECT_EQ(table(a.output), table(b.output));
+  EXPECT_EQ(table(a.output), table(c.output));
+  EXPECT_EQ(read_trace(dir.file("t.txt")).records.size(), 5000u);
+}
+
+TEST(CliCache, CachebenchRejectsBadInput) {
+  testing::TempDir dir;
+  std::ofstream(dir.file("bad.txt")) << "1 2\nxyz\n";
+  auto r = brickyard("cachebench " + dir.file("bad.txt"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.output, "bad.txt: line 2")) << r.output;
+  r = brickyard("cachebench --synthetic zipf --policies lru,mru");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.output, "unknown cache policy 'mru'")) << r.output;
+  r = brickyard("cachebench --synthetic zipf --sizes 0%");
+  EXPECT_EQ(r.exit_code, 2);
+  r = brickyard("cachebench");
+  EXPECT_TRUE(contains(r.output, "give a TRACE file or --synthetic")) << r.output;
+  r = brickyard("cachebench --synthetic spiral");
+  EXPECT_TRUE(contains(r.output, "unknown synthetic trace 'spiral'")) << r.output;
+}
+
+TEST(CliCache, FlightRecordsATraceThatCachebenchReplays) {
+  testing::TempDir dir;
+  ASSERT_EQ(brickyard("-q import field:fbm --size 96 --type u8 --brick-size 16 --out " + dir.file("s")).exit_code, 0);
+  std::ofstream(dir.file("path.json")) << R"({ "frames": 12, "image": {"width": 160, "height": 120},
+    "camera_path": { "keyframes": [ {"eye": [0.5, -1.5, 0.5], "target": [0.5, 0.5, 0.5]},
+                                    {"eye": [0.5, 0.2, 0.5], "target": [0.5, 0.9, 0.5]} ] } })";
+  auto r = brickyard("flight " + dir.file("s") + " --path " + dir.file("path.json") + " --l1 1MiB --l2 2MiB --trace " +
+                     dir.file("f.bytrace") + " --stats " + dir.file("stats.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "12 frames at 160x120")) << r.output;
+  EXPECT_TRUE(contains(testing::read_file(dir.file("stats.json")), "\"l2_peak_bytes\"")) << r.output;
+  const Trace t = read_trace(dir.file("f.bytrace"));
+  EXPECT_EQ(t.frames(), 13u);  // frames 1..12 (frame 0 is before the first frame_begin)
+  r = brickyard("cachebench " + dir.file("f.bytrace") + " --policies lru,opt --sizes 10%,50%");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "prefetch fills")) << r.output;
+  r = brickyard("flight " + dir.file("s") + " --path " + dir.file("nothing.json"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.output, "nothing.json: cannot open")) << r.output;
+}
+
+}  // namespace
+}  // namespace brickyard
