@@ -7,6 +7,8 @@
 
 #include <benchmark/benchmark.h>
 
+#include "bench_util.h"
+
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -33,12 +35,7 @@ namespace {
 using namespace brickyard;
 namespace fs = std::filesystem;
 
-std::string bench_dir() {
-  const char* env = std::getenv("BRICKYARD_BENCH_DIR");
-  std::string dir = env ? env : "/tmp/brickyard-bench";
-  fs::create_directories(dir);
-  return dir;
-}
+using bench::bench_dir;
 
 std::string store_of(const std::string& field, int64_t n, int brick) {
   const std::string dir = fmt::format("{}/{}-{}-u8-m{}.store", bench_dir(), field, n, brick);
@@ -220,11 +217,4 @@ void register_all() {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  register_all();
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  return 0;
-}
+int main(int argc, char** argv) { return brickyard::bench::run_benchmarks(argc, argv, register_all); }

@@ -8,6 +8,8 @@
 
 #include <benchmark/benchmark.h>
 
+#include "bench_util.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
@@ -32,12 +34,7 @@ namespace {
 using namespace brickyard;
 namespace fs = std::filesystem;
 
-std::string bench_dir() {
-  const char* env = std::getenv("BRICKYARD_BENCH_DIR");
-  std::string dir = env ? env : "/tmp/brickyard-bench";
-  fs::create_directories(dir);
-  return dir;
-}
+using bench::bench_dir;
 
 /// A raw file of `field` at n^3, generated on first use.
 std::string raw_input(const std::string& field, int64_t n, ValueType type) {
@@ -227,11 +224,4 @@ void register_all() {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  register_all();
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  return 0;
-}
+int main(int argc, char** argv) { return brickyard::bench::run_benchmarks(argc, argv, register_all); }

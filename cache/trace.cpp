@@ -16,6 +16,7 @@
 #include <fmt/format.h>
 
 #include "cache/policy.h"
+#include "core/atomic_file.h"
 #include "core/error.h"
 
 namespace brickyard {
@@ -208,61 +209,48 @@ Trace read_trace(const std::string& path, TraceFormat format) {
 }
 
 void write_trace(const std::string& path, const Trace& trace, TraceFormat format) {
-  const std::string tmp = path + ".partial";
-  {
-    FilePtr f(std::fopen(tmp.c_str(), "wb"));
-    if (!f) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path);
-    bool ok = true;
-    if (format == TraceFormat::text) {
-      for (const auto& r : trace.records) ok = ok && std::fprintf(f.get(), "%llu %u\n", (unsigned long long)r.key, r.size) > 0;
+  AtomicFile file(path);
+  if (format == TraceFormat::text) {
+    std::string text;
+    for (const auto& r : trace.records) text += fmt::format("{} {}\n", r.key, r.size);
+    file.write(text.data(), text.size());
+    file.commit();
+    return;
+  }
+  if (format == TraceFormat::brickyard) {
+    std::byte header[16];
+    std::memcpy(header, kMagic, 8);
+    put<uint64_t>(header + 8, trace.records.size());
+    file.write(header, 16);
+  }
+  const std::vector<uint64_t> next =
+      format == TraceFormat::oracle_general ? next_demand_access(trace) : std::vector<uint64_t>{};
+  std::vector<std::byte> buffer;
+  buffer.reserve(kRecordBytes * 65536);
+  for (size_t i = 0; i < trace.records.size(); ++i) {
+    const TraceRecord& r = trace.records[i];
+    std::byte rec[kRecordBytes] = {};
+    if (format == TraceFormat::brickyard) {
+      put<uint64_t>(rec, r.key);
+      put<uint32_t>(rec + 8, r.frame);
+      put<uint32_t>(rec + 12, r.size);
+      put<uint8_t>(rec + 16, uint8_t(r.kind));
+      put<uint8_t>(rec + 17, r.hit_level);
+      put<uint32_t>(rec + 20, r.thread);
     } else {
-      if (format == TraceFormat::brickyard) {
-        std::byte header[16];
-        std::memcpy(header, kMagic, 8);
-        put<uint64_t>(header + 8, trace.records.size());
-        ok = std::fwrite(header, 1, 16, f.get()) == 16;
-      }
-      const std::vector<uint64_t> next = format == TraceFormat::oracle_general ? next_demand_access(trace) : std::vector<uint64_t>{};
-      std::vector<std::byte> buffer;
-      buffer.reserve(kRecordBytes * 65536);
-      auto flush = [&] {
-        ok = ok && std::fwrite(buffer.data(), 1, buffer.size(), f.get()) == buffer.size();
-        buffer.clear();
-      };
-      for (size_t i = 0; i < trace.records.size(); ++i) {
-        const TraceRecord& r = trace.records[i];
-        std::byte rec[kRecordBytes] = {};
-        if (format == TraceFormat::brickyard) {
-          put<uint64_t>(rec, r.key);
-          put<uint32_t>(rec + 8, r.frame);
-          put<uint32_t>(rec + 12, r.size);
-          put<uint8_t>(rec + 16, uint8_t(r.kind));
-          put<uint8_t>(rec + 17, r.hit_level);
-          put<uint32_t>(rec + 20, r.thread);
-        } else {
-          put<uint32_t>(rec, r.frame);
-          put<uint64_t>(rec + 4, r.key);
-          put<uint32_t>(rec + 12, r.size);
-          put<int64_t>(rec + 16, next[i] == kNoNextAccess ? int64_t(-1) : int64_t(next[i]));
-        }
-        buffer.insert(buffer.end(), rec, rec + kRecordBytes);
-        if (buffer.size() >= kRecordBytes * 65536) flush();
-      }
-      flush();
+      put<uint32_t>(rec, r.frame);
+      put<uint64_t>(rec + 4, r.key);
+      put<uint32_t>(rec + 12, r.size);
+      put<int64_t>(rec + 16, next[i] == kNoNextAccess ? int64_t(-1) : int64_t(next[i]));
     }
-    ok = ok && std::fflush(f.get()) == 0;
-    if (!ok) {
-      f.reset();
-      std::remove(tmp.c_str());
-      throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(errno))).with_file(path);
+    buffer.insert(buffer.end(), rec, rec + kRecordBytes);
+    if (buffer.size() >= kRecordBytes * 65536) {
+      file.write(buffer.data(), buffer.size());
+      buffer.clear();
     }
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("cannot move into place: {}", ec.message())).with_file(path);
-  }
+  file.write(buffer.data(), buffer.size());
+  file.commit();
 }
 
 Trace zipf_trace(uint64_t objects, uint64_t requests, double alpha, uint64_t seed, uint32_t size) {

@@ -1,5 +1,7 @@
 #include "core/image.h"
 
+#include "core/atomic_file.h"
+
 #include <png.h>
 
 #include <cerrno>
@@ -35,48 +37,40 @@ void on_png_warning(png_structp, png_const_charp) {}
 
 }  // namespace
 
-void write_png(const std::string& path, const ImageRGBA8& image) {
-  if (image.width() <= 0 || image.height() <= 0)
-    throw Error(Errc::invalid_argument, "cannot write an empty image").with_file(path);
-  const std::string tmp = path + ".partial";
-  FilePtr file(std::fopen(tmp.c_str(), "wb"));
-  if (!file) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path);
-
-  PngErrorState state;
+namespace {
+// libpng reports errors by longjmp: this function holds no C++ object that a jump could skip.
+bool write_png_rows(std::FILE* file, PngErrorState& state, const ImageRGBA8& image) {
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &state, on_png_error, on_png_warning);
   png_infop info = png ? png_create_info_struct(png) : nullptr;
   if (!png || !info) {
     png_destroy_write_struct(&png, nullptr);
-    throw Error(Errc::resource, "libpng could not allocate its state").with_file(path);
+    std::snprintf(state.message, sizeof(state.message), "could not allocate libpng state");
+    return false;
   }
   if (setjmp(state.jump)) {
     png_destroy_write_struct(&png, &info);
-    file.reset();
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("libpng: {}", state.message)).with_file(path);
+    return false;
   }
-  png_init_io(png, file.get());
+  png_init_io(png, file);
   png_set_IHDR(png, info, png_uint_32(image.width()), png_uint_32(image.height()), 8, PNG_COLOR_TYPE_RGBA,
                PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_set_compression_level(png, 3);  // images are large and re-written often: favour speed
   png_write_info(png, info);
-  for (int y = 0; y < image.height(); ++y)
-    png_write_row(png, reinterpret_cast<png_const_bytep>(image.row(y)));
+  for (int y = 0; y < image.height(); ++y) png_write_row(png, reinterpret_cast<png_const_bytep>(image.row(y)));
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
+  return true;
+}
+}  // namespace
 
-  if (std::fflush(file.get()) != 0 || std::ferror(file.get())) {
-    file.reset();
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(errno))).with_file(path);
-  }
-  file.reset();
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("cannot move into place: {}", ec.message())).with_file(path);
-  }
+void write_png(const std::string& path, const ImageRGBA8& image) {
+  if (image.width() <= 0 || image.height() <= 0)
+    throw Error(Errc::invalid_argument, "cannot write an empty image").with_file(path);
+  AtomicFile file(path);
+  PngErrorState state;
+  if (!write_png_rows(file.stream(), state, image))
+    throw Error(Errc::io, fmt::format("libpng: {}", state.message)).with_file(path);
+  file.commit();
 }
 
 namespace {

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 
 namespace brickyard {
@@ -29,22 +30,9 @@ std::optional<uint64_t> checked_grid_bytes(const Vec3s& dims, ValueType t) {
 std::string raw_sidecar_path(const std::string& raw_path) { return raw_path + ".json"; }
 
 void write_file_atomically(const std::string& path, const std::string& contents) {
-  const std::string tmp = path + ".partial";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path);
-  const bool ok = std::fwrite(contents.data(), 1, contents.size(), f) == contents.size() && std::fflush(f) == 0;
-  const int err = errno;
-  std::fclose(f);
-  if (!ok) {
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(err))).with_file(path);
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("cannot move into place: {}", ec.message())).with_file(path);
-  }
+  AtomicFile file(path);
+  file.write(contents.data(), contents.size());
+  file.commit();
 }
 
 void write_raw_sidecar(const std::string& sidecar_path, const RawVolumeInfo& info) {

@@ -14,6 +14,7 @@
 
 #include <fmt/format.h>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/progress.h"
@@ -101,10 +102,6 @@ void stream_grid(const GridSampler& sampler, int64_t slab_slices,
 }
 
 namespace {
-struct FileCloser {
-  void operator()(std::FILE* f) const { if (f) std::fclose(f); }
-};
-
 template <typename T>
 void update_min_max(std::span<const std::byte> bytes, double& lo, double& hi) {
   const T* v = reinterpret_cast<const T*>(bytes.data());
@@ -122,40 +119,21 @@ void update_min_max(std::span<const std::byte> bytes, double& lo, double& hi) {
 }  // namespace
 
 RawVolumeInfo write_raw_grid(const GridSampler& sampler, const std::string& path, Progress* progress) {
-  const std::string tmp = path + ".partial";
-  std::unique_ptr<std::FILE, FileCloser> file(std::fopen(tmp.c_str(), "wb"));
-  if (!file) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path);
-
+  AtomicFile file(path);
   std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> hash(XXH3_createState(), XXH3_freeState);
   XXH3_64bits_reset(hash.get());
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   uint64_t written = 0;
-  try {
-    stream_grid(
-        sampler, 0,
-        [&](int64_t, int64_t, std::span<const std::byte> bytes) {
-          if (std::fwrite(bytes.data(), 1, bytes.size(), file.get()) != bytes.size())
-            throw Error(Errc::io, fmt::format("write failed after {} bytes: {}", written, std::strerror(errno)))
-                .with_file(path);
-          written += bytes.size();
-          XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
-          dispatch_value_type(sampler.type(), [&](auto tag) { update_min_max<decltype(tag)>(bytes, lo, hi); });
-        },
-        progress);
-    if (std::fflush(file.get()) != 0)
-      throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(errno))).with_file(path);
-  } catch (...) {
-    file.reset();
-    std::remove(tmp.c_str());
-    throw;
-  }
-  file.reset();
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("cannot move into place: {}", ec.message())).with_file(path);
-  }
+  stream_grid(
+      sampler, 0,
+      [&](int64_t, int64_t, std::span<const std::byte> bytes) {
+        file.write(bytes.data(), bytes.size());
+        written += bytes.size();
+        XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
+        dispatch_value_type(sampler.type(), [&](auto tag) { update_min_max<decltype(tag)>(bytes, lo, hi); });
+      },
+      progress);
+  file.commit();
 
   RawVolumeInfo info;
   info.dims = sampler.dims();

@@ -12,6 +12,7 @@
 
 #include <fmt/format.h>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/progress.h"
@@ -78,54 +79,31 @@ void for_each_region_slab(const BrickStore& store, int level, const VoxelBox& re
   }
 }
 
-namespace {
-struct FileCloser {
-  void operator()(std::FILE* f) const { if (f) std::fclose(f); }
-};
-}  // namespace
-
 RawVolumeInfo export_raw(const BrickStore& store, int level, const VoxelBox& region, const std::string& path,
                          Progress* progress) {
-  const std::string tmp = path + ".partial";
-  std::unique_ptr<std::FILE, FileCloser> file(std::fopen(tmp.c_str(), "wb"));
-  if (!file) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path);
+  AtomicFile file(path);
   std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> hash(XXH3_createState(), XXH3_freeState);
   XXH3_64bits_reset(hash.get());
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   uint64_t written = 0;
   const ValueType type = store.format().type;
-  try {
-    for_each_region_slab(
-        store, level, region,
-        [&](int64_t, int64_t, std::span<const std::byte> bytes) {
-          if (std::fwrite(bytes.data(), 1, bytes.size(), file.get()) != bytes.size())
-            throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(errno))).with_file(path);
-          written += bytes.size();
-          XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
-          dispatch_value_type(type, [&](auto tag) {
-            using T = decltype(tag);
-            const T* v = reinterpret_cast<const T*>(bytes.data());
-            for (size_t i = 0; i < bytes.size() / sizeof(T); ++i) {
-              lo = std::min(lo, double(v[i]));
-              hi = std::max(hi, double(v[i]));
-            }
-          });
-        },
-        progress);
-    if (std::fflush(file.get()) != 0)
-      throw Error(Errc::io, fmt::format("write failed: {}", std::strerror(errno))).with_file(path);
-  } catch (...) {
-    file.reset();
-    std::remove(tmp.c_str());
-    throw;
-  }
-  file.reset();
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw Error(Errc::io, fmt::format("cannot move into place: {}", ec.message())).with_file(path);
-  }
+  for_each_region_slab(
+      store, level, region,
+      [&](int64_t, int64_t, std::span<const std::byte> bytes) {
+        file.write(bytes.data(), bytes.size());
+        written += bytes.size();
+        XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
+        dispatch_value_type(type, [&](auto tag) {
+          using T = decltype(tag);
+          const T* v = reinterpret_cast<const T*>(bytes.data());
+          for (size_t i = 0; i < bytes.size() / sizeof(T); ++i) {
+            lo = std::min(lo, double(v[i]));
+            hi = std::max(hi, double(v[i]));
+          }
+        });
+      },
+      progress);
+  file.commit();
   const Manifest& m = store.manifest();
   const double scale = double(int64_t(1) << store.layout().steps(level));
   RawVolumeInfo info;

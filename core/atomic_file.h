@@ -1,0 +1,34 @@
+#pragma once
+/// @file atomic_file.h
+/// @brief Writing a file so that readers never see half of it: the bytes go to PATH.partial,
+/// which commit() flushes and renames over PATH; if commit() is never reached (an error, an
+/// exception), the partial file is removed.
+
+#include <cstddef>
+#include <cstdio>
+#include <string>
+
+namespace brickyard {
+
+class AtomicFile {
+ public:
+  /// @throws Error(io) naming `path` when PATH.partial cannot be created.
+  explicit AtomicFile(std::string path);
+  ~AtomicFile();
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+
+  /// @brief The open stream, for libraries that write through a FILE* (libpng).
+  std::FILE* stream() { return file_; }
+  /// @throws Error(io) naming the path, with the system's reason.
+  void write(const void* data, size_t bytes);
+  /// @brief Flushes, closes and renames into place. @throws Error(io).
+  void commit();
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_, partial_;
+  std::FILE* file_ = nullptr;
+};
+
+}  // namespace brickyard
