@@ -25,6 +25,17 @@ std::string_view to_string(Codec c) {
 }
 
 void shuffle_bytes(const std::byte* in, std::byte* out, size_t n, size_t elem) {
+  if (elem == 4) {  // spelled out to vectorise, like unshuffle_bytes
+    const uint32_t* v = reinterpret_cast<const uint32_t*>(in);
+    uint8_t* o = reinterpret_cast<uint8_t*>(out);
+    for (size_t i = 0; i < n; ++i) {
+      o[i] = uint8_t(v[i]);
+      o[n + i] = uint8_t(v[i] >> 8);
+      o[2 * n + i] = uint8_t(v[i] >> 16);
+      o[3 * n + i] = uint8_t(v[i] >> 24);
+    }
+    return;
+  }
   for (size_t b = 0; b < elem; ++b) {
     std::byte* dst = out + b * n;
     for (size_t i = 0; i < n; ++i) dst[i] = in[i * elem + b];
@@ -32,13 +43,25 @@ void shuffle_bytes(const std::byte* in, std::byte* out, size_t n, size_t elem) {
 }
 
 void unshuffle_bytes(const std::byte* in, std::byte* out, size_t n, size_t elem) {
-  if (elem == 2) {  // the common 16-bit case, written so the compiler vectorises it
-    const std::byte* lo = in;
-    const std::byte* hi = in + n;
+  // The 16- and 32-bit cases are spelled out so that the compiler vectorises them (the generic
+  // strided loop below ran f32 decoding at a third of the speed).
+  if (elem == 2) {
+    const std::byte* b0 = in;
+    const std::byte* b1 = in + n;
     for (size_t i = 0; i < n; ++i) {
-      out[2 * i] = lo[i];
-      out[2 * i + 1] = hi[i];
+      out[2 * i] = b0[i];
+      out[2 * i + 1] = b1[i];
     }
+    return;
+  }
+  if (elem == 4) {
+    const uint8_t* b0 = reinterpret_cast<const uint8_t*>(in);
+    const uint8_t* b1 = b0 + n;
+    const uint8_t* b2 = b1 + n;
+    const uint8_t* b3 = b2 + n;
+    uint32_t* o = reinterpret_cast<uint32_t*>(out);
+    for (size_t i = 0; i < n; ++i)
+      o[i] = uint32_t(b0[i]) | (uint32_t(b1[i]) << 8) | (uint32_t(b2[i]) << 16) | (uint32_t(b3[i]) << 24);
     return;
   }
   for (size_t b = 0; b < elem; ++b) {
