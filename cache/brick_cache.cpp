@@ -221,7 +221,9 @@ BrickCache::BrickCache(const BrickStore& store, const CacheConfig& config)
       config_(config),
       brick_bytes_(store.format().bytes()),
       slots_(slots_for(config, store.format().bytes()), config.l1_policy),
-      pool_(new std::byte[size_t(slots_for(config, store.format().bytes())) * store.format().bytes()]),
+      // Value-initialised: the pool is faulted in (and its memory committed) once, up front, as a
+      // fixed GPU pool would be, not page by page inside the first frames' uploads.
+      pool_(new std::byte[size_t(slots_for(config, store.format().bytes())) * store.format().bytes()]()),
       l2_(config.l2_bytes, store.format().bytes(), config.l2_policy),
       impl_(std::make_unique<Impl>()) {
   if (config.loader_threads < 1 || config.loader_threads > 256)
