@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <list>
+#include <map>
 #include <random>
 #include <set>
 #include <string>
@@ -134,6 +136,49 @@ TEST(Policies, LruFrameProtectsEverythingUsedThisFrame) {
   EXPECT_EQ(*v, 1u);  // least recently used among those not used in frame 2
   EXPECT_EQ(*p->evict({}), 3u);
   EXPECT_FALSE(p->evict({}).has_value());
+}
+
+// SIEVE as the paper's pseudo-code states it, on a std::list: the reference the
+// implementation must match miss for miss.
+uint64_t reference_sieve_misses(const std::vector<uint64_t>& accesses, size_t capacity) {
+  std::list<std::pair<uint64_t, bool>> queue;  // front = newest; bool = visited
+  std::map<uint64_t, std::list<std::pair<uint64_t, bool>>::iterator> where;
+  auto hand = queue.end();  // end(): start from the tail
+  uint64_t misses = 0;
+  for (uint64_t x : accesses) {
+    if (auto it = where.find(x); it != where.end()) {
+      it->second->second = true;
+      continue;
+    }
+    ++misses;
+    if (queue.size() == capacity) {
+      auto o = hand == queue.end() ? std::prev(queue.end()) : hand;
+      while (o->second) {
+        o->second = false;
+        o = o == queue.begin() ? std::prev(queue.end()) : std::prev(o);
+      }
+      hand = o == queue.begin() ? queue.end() : std::prev(o);
+      where.erase(o->first);
+      queue.erase(o);
+    }
+    queue.emplace_front(x, false);
+    where[x] = queue.begin();
+  }
+  return misses;
+}
+
+TEST(Policies, SieveMatchesThePublishedAlgorithmMissForMiss) {
+  std::mt19937 rng(5);
+  for (int round = 0; round < 20; ++round) {
+    std::vector<uint64_t> accesses;
+    std::geometric_distribution<int> pick(0.01 + 0.01 * round);
+    for (int i = 0; i < 5000; ++i) accesses.push_back(uint64_t(pick(rng)));
+    const size_t capacity = 5 + size_t(round) * 3;
+    PolicyDriver d("sieve", capacity);
+    uint64_t misses = 0;
+    for (uint64_t x : accesses) misses += !d.access(x);
+    EXPECT_EQ(misses, reference_sieve_misses(accesses, capacity)) << "round " << round;
+  }
 }
 
 double miss_ratio(const Trace& t, const std::string& policy, uint64_t capacity) {
