@@ -366,26 +366,47 @@ struct ScanResult {
 };
 
 // The f32 pre-pass: finds non-finite voxels before anything is written, and the finite range.
+// Blocks are scanned branch-free in parallel (exponent bits all set = NaN or infinity); only a
+// block that holds a non-finite value is walked again to count them and find the first.
 ScanResult scan_source(VolumeSource& source, Progress* progress) {
   const Vec3s d = source.dims();
-  const int64_t slab = std::max<int64_t>(1, std::min<int64_t>(d.z, (8 << 20) / (d.x * d.y * 4)));
+  const int64_t slab = std::max<int64_t>(1, std::min<int64_t>(d.z, (32 << 20) / (d.x * d.y * 4)));
   std::vector<float> buffer(size_t(slab * d.x * d.y));
   ScanResult result;
+  constexpr int64_t kBlock = 1 << 14;
   for (int64_t z0 = 0; z0 < d.z; z0 += slab) {
     const int64_t z1 = std::min(d.z, z0 + slab);
-    const size_t n = size_t((z1 - z0) * d.x * d.y);
-    source.read_slab(z0, z1, {reinterpret_cast<std::byte*>(buffer.data()), n * 4});
-    for (size_t i = 0; i < n; ++i) {
-      const float v = buffer[i];
-      if (!std::isfinite(v)) {
-        if (result.nonfinite++ == 0) {
-          const int64_t idx = int64_t(i);
-          result.first = {idx % d.x, (idx / d.x) % d.y, z0 + idx / (d.x * d.y)};
+    const int64_t n = (z1 - z0) * d.x * d.y;
+    source.read_slab(z0, z1, {reinterpret_cast<std::byte*>(buffer.data()), size_t(n) * 4});
+    const int64_t blocks = (n + kBlock - 1) / kBlock;
+    std::vector<ScanResult> partial(static_cast<size_t>(blocks));
+    parallel_for<int64_t>(0, blocks, 1, [&](int64_t b0, int64_t b1) {
+      for (int64_t b = b0; b < b1; ++b) {
+        const int64_t lo = b * kBlock, hi = std::min(n, lo + kBlock);
+        const uint32_t* bits = reinterpret_cast<const uint32_t*>(buffer.data());
+        uint32_t any_nonfinite = 0;
+        float mn = std::numeric_limits<float>::infinity(), mx = -mn;
+        for (int64_t i = lo; i < hi; ++i) {
+          const bool bad = (bits[i] & 0x7f800000u) == 0x7f800000u;
+          any_nonfinite |= uint32_t(bad);
+          const float v = bad ? mn : buffer[size_t(i)];  // keeps NaN out of the comparisons
+          mn = std::min(mn, v);
+          mx = std::max(mx, bad ? mx : v);
         }
-        continue;
+        ScanResult& r = partial[size_t(b)];
+        r.min = mn;
+        r.max = mx;
+        if (!any_nonfinite) continue;
+        for (int64_t i = lo; i < hi; ++i)
+          if (!std::isfinite(buffer[size_t(i)]) && r.nonfinite++ == 0)
+            r.first = {i % d.x, (i / d.x) % d.y, z0 + i / (d.x * d.y)};
       }
-      result.min = std::min(result.min, double(v));
-      result.max = std::max(result.max, double(v));
+    });
+    for (const ScanResult& r : partial) {
+      if (r.nonfinite && result.nonfinite == 0) result.first = r.first;
+      result.nonfinite += r.nonfinite;
+      result.min = std::min(result.min, r.min);
+      result.max = std::max(result.max, r.max);
     }
     if (progress) progress->advance(uint64_t(n));
   }
