@@ -80,6 +80,7 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
     spec.spacing = info.spacing;
     spec.origin = info.origin;
     spec.range = ValueRange{info.min_value, info.max_value};
+    spec.xxh3_64 = info.xxh3_64;
   } else if (o.dims.empty() || o.type.empty()) {
     throw Error(Errc::invalid_argument,
                 fmt::format("a raw file needs --dims and --type, or a sidecar {} describing it", sidecar))
@@ -87,7 +88,8 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
   }
   if (!o.dims.empty()) {
     spec.dims = parse_size(o.dims, "--dims");
-    spec.range.reset();  // the sidecar's range described other dims
+    spec.range.reset();  // the sidecar described another layout
+    spec.xxh3_64.reset();
   }
   if (!o.type.empty()) {
     const ValueType t = value_type_from_string(o.type, "--type");
@@ -125,7 +127,7 @@ void run_import(const ImportOptions& o) {
   std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
   Progress progress(fmt::format("import {}", fs::path(source->name()).filename().string()), uint64_t(volume(d)), "voxels");
   const BuildResult r = build_store(*source, o.out, b, &progress);
-  progress.finish();
+  if (!r.up_to_date) progress.finish();  // otherwise it ends without a closing line: no work done
   if (r.up_to_date) {
     std::cout << fmt::format("{} is complete and up to date; nothing to do (--force rebuilds)\n", o.out);
     return;

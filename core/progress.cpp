@@ -29,7 +29,15 @@ Progress::Progress(std::string label, uint64_t total, std::string unit, Progress
   next_report_ns_.store(static_cast<int64_t>(interval_ * 1e9));
 }
 
-Progress::~Progress() { finish(); }
+Progress::~Progress() {
+  // A task abandoned before any work (an error, nothing to do) ends without a closing line.
+  if (done_.load(std::memory_order_relaxed) == 0) {
+    std::lock_guard lock(print_mutex_);
+    if (style_ == ProgressStyle::bar && !finished_) *out_ << "\r\033[K" << std::flush;
+    finished_ = true;
+  }
+  finish();
+}
 
 std::string Progress::amount(double n) const {
   if (unit_ == "B") return format_bytes(n);

@@ -89,9 +89,10 @@ class RawSource final : public VolumeSource {
     nlohmann::json j = {{"kind", "raw"},
                         {"path", path_},
                         {"bytes", size_},
-                        {"mtime_ns", mtime_ns_},
                         {"header_bytes", spec_.header_bytes},
                         {"endianness", spec_.little_endian ? "little" : "big"}};
+    if (spec_.xxh3_64) j["xxh3_64"] = fmt::format("{:016x}", *spec_.xxh3_64);
+    else j["mtime_ns"] = mtime_ns_;
     return j.dump();
   }
 

@@ -52,6 +52,9 @@ struct RawFileSpec {
   Vec3d spacing{1.0};
   Vec3d origin{0.0};
   std::optional<ValueRange> range;  ///< from a sidecar, if any
+  /// XXH3-64 of the file from its sidecar: then the store's record of its source is the
+  /// content, so regenerating identical data does not make a complete store look stale.
+  std::optional<uint64_t> xxh3_64;
 };
 
 /// @brief A raw file, memory-mapped. Checks its size against dims, type and header first.
