@@ -196,6 +196,7 @@ BrickHandle& BrickHandle::operator=(BrickHandle&& o) noexcept {
     owned_ = std::move(o.owned_);
     min_ = o.min_;
     max_ = o.max_;
+    constant_ = o.constant_;
     error_ = std::move(o.error_);
     o.cache_ = nullptr;
     o.slot_ = kNoSlot;
@@ -357,6 +358,7 @@ BrickHandle BrickCache::make_handle(const BrickKey& key, BrickHandle::State stat
   const NodeRecord& n = store_.nodes().at(key);
   h.min_ = n.min;
   h.max_ = n.max;
+  h.constant_ = n.constant;
   return h;
 }
 

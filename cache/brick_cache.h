@@ -77,7 +77,7 @@ class BrickHandle {
   /// @brief The node's value range (its trilinear cells) and, for constant nodes, the value.
   float min() const { return min_; }
   float max() const { return max_; }
-  float constant_value() const { return min_; }
+  float constant_value() const { return constant_; }
   /// @brief Why a failed handle failed (corrupt brick, key outside the store).
   const std::string& error() const { return error_; }
 
@@ -91,7 +91,7 @@ class BrickHandle {
   uint32_t slot_ = kNoSlot;
   const std::byte* data_ = nullptr;
   BrickBuffer owned_;  // a private copy when the pool had no free slot
-  float min_ = 0, max_ = 0;
+  float min_ = 0, max_ = 0, constant_ = 0;
   std::string error_;
 };
 

@@ -128,6 +128,30 @@ TEST_F(BrickCacheTest, ConstantNodesNeedNoSlot) {
   EXPECT_EQ(cache.stats().constant_hits, uint64_t(constants));
 }
 
+TEST(BrickCacheConstants, NearConstantBricksCarryTheirStoredValue) {
+  // With a tolerance, a constant node's value is the middle of its range, not its minimum.
+  testing::TempDir dir;
+  BuildOptions o;
+  o.brick_size = 8;
+  o.constant_tolerance = 255;
+  auto src = make_field_source(make_field("sphere"), {32, 32, 32}, ValueType::u8);
+  build_store(*src, dir.file("s"), o);
+  BrickStore store(dir.file("s"));
+  CacheConfig c;
+  c.l1_slots = 4;
+  c.l2_bytes = 4 * store.format().bytes();
+  BrickCache cache(store, c);
+  int differs = 0;
+  for (int64_t i = 0; i < store.layout().brick_count(store.layout().finest()); ++i) {
+    const BrickKey k = store.layout().key_at(store.layout().finest(), i);
+    BrickHandle h = cache.lookup(k);
+    ASSERT_TRUE(h.constant());
+    EXPECT_EQ(h.constant_value(), store.nodes().at(k).constant);
+    differs += h.constant_value() != h.min();
+  }
+  EXPECT_GT(differs, 0);
+}
+
 TEST_F(BrickCacheTest, PinnedSlotsAreNeverEvicted) {
   BrickCache cache(*store_, small_config(4, 64, store_->format().bytes()));
   const auto keys = finest_keys(*store_);
