@@ -264,19 +264,8 @@ void BrickCache::worker_loop() {
       data = l2_.find(key);
       if (!data) {
         try {
-          auto record = store_.record(txn, k);
-          if (!record) throw Error(Errc::corrupt, "brick record is missing").with_file(store_.path()).with_key(k.to_string());
-          Stopwatch watch;
-          auto buffer = std::make_shared<std::vector<std::byte>>(brick_bytes_);
-          decode_brick(store_.format(), k, *record, *buffer);
-          m.l3_decode_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
-          m.l3_reads.fetch_add(1, std::memory_order_relaxed);
-          m.l3_bytes_read.fetch_add(record->size(), std::memory_order_relaxed);
-          m.l3_bytes_decoded.fetch_add(brick_bytes_, std::memory_order_relaxed);
-          data = std::move(buffer);
-          l2_.insert(key, data);
-        } catch (Error& e) {
-          if (e.file().empty()) e.with_file(store_.path());
+          data = load_from_store(txn, k);
+        } catch (const Error& e) {
           error = e.what();
         }
       }
@@ -291,6 +280,27 @@ void BrickCache::worker_loop() {
     drain_ready();
     std::lock_guard lock(m.queue_mutex);
     if (m.pending.empty() && m.in_flight.empty()) m.idle_cv.notify_all();
+  }
+}
+
+BrickBuffer BrickCache::load_from_store(const lmdb::ReadTxn& txn, const BrickKey& key) {
+  Impl& m = *impl_;
+  try {
+    auto record = store_.record(txn, key);
+    if (!record) throw Error(Errc::corrupt, "brick record is missing").with_key(key.to_string());
+    Stopwatch watch;
+    auto buffer = std::make_shared<std::vector<std::byte>>(brick_bytes_);
+    decode_brick(store_.format(), key, *record, *buffer);
+    m.l3_decode_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
+    m.l3_reads.fetch_add(1, std::memory_order_relaxed);
+    m.l3_bytes_read.fetch_add(record->size(), std::memory_order_relaxed);
+    m.l3_bytes_decoded.fetch_add(brick_bytes_, std::memory_order_relaxed);
+    BrickBuffer data = std::move(buffer);
+    l2_.insert(key.code(), data);
+    return data;
+  } catch (Error& e) {
+    if (e.file().empty()) e.with_file(store_.path());
+    throw;
   }
 }
 
@@ -485,25 +495,13 @@ BrickHandle BrickCache::fetch(const BrickKey& key) {
   uint8_t level = 2;
   if (!data) {
     level = 3;
-    auto txn = store_.begin_read();
-    auto record = store_.record(txn, key);
-    auto buffer = std::make_shared<std::vector<std::byte>>(brick_bytes_);
     try {
-      if (!record) throw Error(Errc::corrupt, "brick record is missing").with_file(store_.path()).with_key(key.to_string());
-      Stopwatch watch;
-      decode_brick(store_.format(), key, *record, *buffer);
-      m.l3_decode_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
-      m.l3_reads.fetch_add(1, std::memory_order_relaxed);
-      m.l3_bytes_read.fetch_add(record->size(), std::memory_order_relaxed);
-      m.l3_bytes_decoded.fetch_add(brick_bytes_, std::memory_order_relaxed);
-    } catch (Error& e) {
+      data = load_from_store(store_.begin_read(), key);
+    } catch (const Error& e) {
       std::lock_guard lock(m.queue_mutex);
       m.failed.emplace(code, e.what());
-      e.with_file(store_.path());
       throw;
     }
-    data = std::move(buffer);
-    l2_.insert(code, data);
   }
   if (m.trace) m.trace->add(key, uint32_t(m.frame.load()), uint32_t(brick_bytes_), AccessKind::blocking, level);
   // Into the pool, pinned for the caller. Another thread may be placing the same brick: then

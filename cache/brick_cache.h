@@ -182,6 +182,9 @@ class BrickCache {
   BrickHandle make_handle(const BrickKey& key, BrickHandle::State state) const;
   BrickHandle resident_handle(const BrickKey& key, uint32_t slot);
   void worker_loop();
+  /// Reads and decodes a brick from the store, counts it and keeps it in L2. Throws the
+  /// decode's Error, naming the store.
+  BrickBuffer load_from_store(const lmdb::ReadTxn& txn, const BrickKey& key);
   /// Collects the requests staged in every stripe.
   std::vector<BrickRequest> take_staged();
   /// Merges requests into the loader queue; the caller holds the queue mutex.

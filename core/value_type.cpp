@@ -1,5 +1,8 @@
 #include "core/value_type.h"
 
+#include <algorithm>
+#include <limits>
+
 #include <fmt/format.h>
 
 #include "core/error.h"
@@ -26,6 +29,22 @@ ValueType value_type_from_string(std::string_view s, std::string_view field) {
   if (auto t = parse_value_type(s)) return *t;
   throw Error(Errc::invalid_argument, fmt::format("unknown value type '{}' (expected u8, u16 or f32)", s))
       .with_field(field);
+}
+
+void extend_range(std::span<const std::byte> values, ValueType type, double& lo, double& hi) {
+  dispatch_value_type(type, [&](auto tag) {
+    using T = decltype(tag);
+    const T* v = reinterpret_cast<const T*>(values.data());
+    const size_t n = values.size() / sizeof(T);
+    if (n == 0) return;
+    T mn = std::numeric_limits<T>::max(), mx = std::numeric_limits<T>::lowest();
+    for (size_t i = 0; i < n; ++i) {
+      mn = std::min(mn, v[i]);
+      mx = std::max(mx, v[i]);
+    }
+    lo = std::min(lo, double(mn));
+    hi = std::max(hi, double(mx));
+  });
 }
 
 }  // namespace brickyard

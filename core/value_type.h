@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -53,5 +54,8 @@ decltype(auto) dispatch_value_type(ValueType t, F&& f) {
   }
   return f(float{});
 }
+
+/// @brief Widens [lo, hi] to cover every value in `values` (stored as `type`, native order).
+void extend_range(std::span<const std::byte> values, ValueType type, double& lo, double& hi);
 
 }  // namespace brickyard

@@ -101,22 +101,6 @@ void stream_grid(const GridSampler& sampler, int64_t slab_slices,
   if (pending.valid()) pending.get();
 }
 
-namespace {
-template <typename T>
-void update_min_max(std::span<const std::byte> bytes, double& lo, double& hi) {
-  const T* v = reinterpret_cast<const T*>(bytes.data());
-  const size_t n = bytes.size() / sizeof(T);
-  T mn = std::numeric_limits<T>::max(), mx = std::numeric_limits<T>::lowest();
-  for (size_t i = 0; i < n; ++i) {
-    mn = std::min(mn, v[i]);
-    mx = std::max(mx, v[i]);
-  }
-  if (n) {
-    lo = std::min(lo, double(mn));
-    hi = std::max(hi, double(mx));
-  }
-}
-}  // namespace
 
 RawVolumeInfo write_raw_grid(const GridSampler& sampler, const std::string& path, Progress* progress) {
   AtomicFile file(path);
@@ -130,7 +114,7 @@ RawVolumeInfo write_raw_grid(const GridSampler& sampler, const std::string& path
         file.write(bytes.data(), bytes.size());
         written += bytes.size();
         XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
-        dispatch_value_type(sampler.type(), [&](auto tag) { update_min_max<decltype(tag)>(bytes, lo, hi); });
+        extend_range(bytes, sampler.type(), lo, hi);
       },
       progress);
   file.commit();

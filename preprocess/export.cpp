@@ -93,14 +93,7 @@ RawVolumeInfo export_raw(const BrickStore& store, int level, const VoxelBox& reg
         file.write(bytes.data(), bytes.size());
         written += bytes.size();
         XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
-        dispatch_value_type(type, [&](auto tag) {
-          using T = decltype(tag);
-          const T* v = reinterpret_cast<const T*>(bytes.data());
-          for (size_t i = 0; i < bytes.size() / sizeof(T); ++i) {
-            lo = std::min(lo, double(v[i]));
-            hi = std::max(hi, double(v[i]));
-          }
-        });
+        extend_range(bytes, type, lo, hi);
       },
       progress);
   file.commit();
