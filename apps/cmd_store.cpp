@@ -81,6 +81,12 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
     spec.origin = info.origin;
     spec.range = ValueRange{info.min_value, info.max_value};
     spec.xxh3_64 = info.xxh3_64;
+    if (info.source.rfind("field ", 0) == 0) {
+      nlohmann::json g = {{"field", info.source.substr(6)}, {"params", nlohmann::json::object()}};
+      for (const auto& [name, value] : info.source_params) g["params"][name] = value;
+      if (info.quantization) g["quantization"] = {info.quantization->first, info.quantization->second};
+      spec.generator_json = g.dump();
+    }
   } else if (o.dims.empty() || o.type.empty()) {
     throw Error(Errc::invalid_argument,
                 fmt::format("a raw file needs --dims and --type, or a sidecar {} describing it", sidecar))
@@ -90,10 +96,11 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
     spec.dims = parse_size(o.dims, "--dims");
     spec.range.reset();  // the sidecar described another layout
     spec.xxh3_64.reset();
+    spec.generator_json.clear();
   }
   if (!o.type.empty()) {
     const ValueType t = value_type_from_string(o.type, "--type");
-    if (t != spec.type) spec.range.reset();
+    if (t != spec.type) spec.range.reset(), spec.generator_json.clear();
     spec.type = t;
   }
   if (o.endian != "little" && o.endian != "big")

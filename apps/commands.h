@@ -17,5 +17,7 @@ void add_version_command(CLI::App& app);
 void add_store_commands(CLI::App& app, int& exit_status);
 /// @brief cachebench.
 void add_cache_commands(CLI::App& app);
+/// @brief render, bench.
+void add_render_commands(CLI::App& app);
 
 }  // namespace brickyard::cli

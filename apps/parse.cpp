@@ -80,23 +80,6 @@ std::vector<int64_t> parse_int_list(std::string_view text, size_t count, std::st
   return out;
 }
 
-uint64_t parse_bytes(std::string_view text, std::string_view option) {
-  size_t digits = 0;
-  while (digits < text.size() && (std::isdigit(static_cast<unsigned char>(text[digits])) || text[digits] == '.')) ++digits;
-  double v = 0;
-  auto [ptr, ec] = std::from_chars(text.data(), text.data() + digits, v);
-  const std::string_view unit = text.substr(digits);
-  double scale = 0;
-  if (unit.empty() || unit == "B") scale = 1;
-  else if (unit == "KiB" || unit == "KB" || unit == "K") scale = 1024.0;
-  else if (unit == "MiB" || unit == "MB" || unit == "M") scale = 1024.0 * 1024;
-  else if (unit == "GiB" || unit == "GB" || unit == "G") scale = 1024.0 * 1024 * 1024;
-  else if (unit == "TiB" || unit == "TB" || unit == "T") scale = 1024.0 * 1024 * 1024 * 1024;
-  if (digits == 0 || ec != std::errc() || ptr != text.data() + digits || scale == 0 || v <= 0)
-    throw Error(Errc::invalid_argument, fmt::format("'{}' is not a size such as 64MiB", text)).with_field(option);
-  return uint64_t(v * scale);
-}
-
 std::pair<std::string, double> parse_assignment(std::string_view text, std::string_view option) {
   const size_t eq = text.find('=');
   if (eq == std::string_view::npos || eq == 0)

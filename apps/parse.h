@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/math.h"
+#include "core/units.h"  // parse_bytes
 
 namespace brickyard::cli {
 
@@ -18,8 +19,6 @@ Vec3d parse_vec3(std::string_view text, std::string_view option);
 std::pair<double, double> parse_range(std::string_view text, std::string_view option);
 /// @brief Exactly `count` comma-separated integers.
 std::vector<int64_t> parse_int_list(std::string_view text, size_t count, std::string_view option);
-/// @brief "64MiB", "2GiB", "1048576", "512KiB" (also KB/MB/GB as binary units).
-uint64_t parse_bytes(std::string_view text, std::string_view option);
 /// @brief "name=value" with a finite numeric value.
 std::pair<std::string, double> parse_assignment(std::string_view text, std::string_view option);
 

@@ -1,8 +1,12 @@
 #include "core/units.h"
 
+#include <cctype>
+#include <charconv>
 #include <cmath>
 
 #include <fmt/format.h>
+
+#include "core/error.h"
 
 namespace brickyard {
 
@@ -33,6 +37,23 @@ std::string format_duration(double seconds) {
   int64_t h = total / 3600, m = (total / 60) % 60, s = total % 60;
   if (h > 0) return fmt::format("{}:{:02}:{:02}", h, m, s);
   return fmt::format("{}:{:02}", m, s);
+}
+
+uint64_t parse_bytes(std::string_view text, std::string_view field) {
+  size_t digits = 0;
+  while (digits < text.size() && (std::isdigit(static_cast<unsigned char>(text[digits])) || text[digits] == '.')) ++digits;
+  double v = 0;
+  auto [ptr, ec] = std::from_chars(text.data(), text.data() + digits, v);
+  const std::string_view unit = text.substr(digits);
+  double scale = 0;
+  if (unit.empty() || unit == "B") scale = 1;
+  else if (unit == "KiB" || unit == "KB" || unit == "K") scale = 1024.0;
+  else if (unit == "MiB" || unit == "MB" || unit == "M") scale = 1024.0 * 1024;
+  else if (unit == "GiB" || unit == "GB" || unit == "G") scale = 1024.0 * 1024 * 1024;
+  else if (unit == "TiB" || unit == "TB" || unit == "T") scale = 1024.0 * 1024 * 1024 * 1024;
+  if (digits == 0 || ec != std::errc() || ptr != text.data() + digits || scale == 0 || v <= 0)
+    throw Error(Errc::invalid_argument, fmt::format("'{}' is not a size such as 64MiB", text)).with_field(field);
+  return uint64_t(v * scale);
 }
 
 }  // namespace brickyard

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 
 namespace brickyard {
 
@@ -13,5 +14,8 @@ std::string format_count(double n);
 std::string format_bytes(double bytes);
 /// @brief Seconds as "12.3 ms", "4.56 s", "3:07" or "1:02:03".
 std::string format_duration(double seconds);
+/// @brief "64MiB", "2GiB", "1048576", "512KiB" (also KB/MB/GB as binary units) as bytes;
+/// Error(invalid_argument) naming `field` otherwise.
+uint64_t parse_bytes(std::string_view text, std::string_view field);
 
 }  // namespace brickyard

@@ -93,6 +93,7 @@ class RawSource final : public VolumeSource {
                         {"endianness", spec_.little_endian ? "little" : "big"}};
     if (spec_.xxh3_64) j["xxh3_64"] = fmt::format("{:016x}", *spec_.xxh3_64);
     else j["mtime_ns"] = mtime_ns_;
+    if (!spec_.generator_json.empty()) j["generator"] = nlohmann::json::parse(spec_.generator_json);
     return j.dump();
   }
 

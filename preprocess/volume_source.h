@@ -55,6 +55,10 @@ struct RawFileSpec {
   /// XXH3-64 of the file from its sidecar: then the store's record of its source is the
   /// content, so regenerating identical data does not make a complete store look stale.
   std::optional<uint64_t> xxh3_64;
+  /// What generated the data, from its sidecar: {"field": NAME, "params": {...}, and for u8/u16
+  /// "quantization": [lo, hi]} as JSON text ("" when unknown). Recorded in the store's source so
+  /// that the reference renderer can render the analytic truth.
+  std::string generator_json;
 };
 
 /// @brief A raw file, memory-mapped. Checks its size against dims, type and header first.

@@ -1,0 +1,341 @@
+// `brickyard render` and `brickyard bench`: render a scene with one back end, or every back end
+// at a sweep of its quality knob against the reference renderer.
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "apps/commands.h"
+#include "apps/parse.h"
+#include "core/error.h"
+#include "core/raw_volume.h"
+#include "core/timing.h"
+#include "core/units.h"
+#include "renderers/common/bench_report.h"
+#include "renderers/common/metrics.h"
+#include "renderers/common/render.h"
+
+namespace brickyard::cli {
+namespace fs = std::filesystem;
+
+namespace {
+
+/// "all", "N", "A-B" (inclusive) -> frame numbers within [0, count).
+std::vector<int> parse_frames(const std::string& text, int count) {
+  std::vector<int> out;
+  if (text.empty()) return {0};
+  if (text == "all") {
+    for (int f = 0; f < count; ++f) out.push_back(f);
+    return out;
+  }
+  const size_t dash = text.find('-');
+  const auto ints = parse_int_list(dash == std::string::npos ? text : text.substr(0, dash) + "," + text.substr(dash + 1),
+                                   dash == std::string::npos ? 1 : 2, "--frames");
+  const int64_t a = ints[0], b = ints.size() > 1 ? ints[1] : ints[0];
+  if (a < 0 || b < a || b >= count)
+    throw Error(Errc::invalid_argument, fmt::format("'{}' is outside the scene's frames 0-{}", text, count - 1)).with_field("--frames");
+  for (int64_t f = a; f <= b; ++f) out.push_back(int(f));
+  return out;
+}
+
+/// out.png -> out_0007.png when rendering several frames.
+std::string frame_path(const std::string& path, int frame, bool several) {
+  if (path.empty() || !several) return path;
+  const fs::path p(path);
+  return (p.parent_path() / fmt::format("{}_{:04d}{}", p.stem().string(), frame, p.extension().string())).string();
+}
+
+std::map<std::string, double> parse_sets(const std::vector<std::string>& sets, const char* option) {
+  std::map<std::string, double> out;
+  for (const auto& s : sets) {
+    auto [k, v] = parse_assignment(s, option);
+    out[k] = v;
+  }
+  return out;
+}
+
+void write_text(const std::string& path, const std::string& text) { write_file_atomically(path, text); }
+
+struct RenderOptions {
+  std::string scene, out, depth, normals, stats, frames, backend, error_maps;
+  std::vector<std::string> sets;
+  bool list = false;
+};
+
+void print_backends() {
+  for (const BackendEntry& e : builtin_backends().entries()) {
+    std::string modes;
+    for (RenderMode m : e.info.modes) modes += fmt::format("{}{}", modes.empty() ? "" : ",", to_string(m));
+    std::cout << fmt::format("{}  ({})\n    {}\n", e.info.name, modes, e.info.description);
+    for (const BackendParam& p : e.info.params)
+      std::cout << fmt::format("    {:<10} default {:<8g} [{:g}, {:g}]  {}\n", p.name, p.default_value, p.lo, p.hi, p.doc);
+    if (!e.info.quality_param.empty()) {
+      std::string sweep;
+      for (double v : e.info.quality_sweep) sweep += fmt::format("{}{:g}", sweep.empty() ? "" : ",", v);
+      std::cout << fmt::format("    bench sweeps {} = {}\n", e.info.quality_param, sweep);
+    }
+  }
+}
+
+void run_render(const RenderOptions& o) {
+  if (o.list) {
+    print_backends();
+    return;
+  }
+  if (o.scene.empty()) throw Error(Errc::invalid_argument, "a scene file is required").with_field("SCENE");
+  if (o.out.empty()) throw Error(Errc::invalid_argument, "an output PNG is required").with_field("-o");
+  const Scene scene = load_scene(o.scene);
+  RenderSession::Options opts;
+  opts.backend = o.backend;
+  opts.params = parse_sets(o.sets, "--set");
+  RenderSession session(scene, opts);
+  const std::vector<int> frames = parse_frames(o.frames, scene.frames());
+  const bool several = frames.size() > 1;
+  FrameOutputs outputs;
+  outputs.depth = true;
+  outputs.normals = !o.normals.empty() || !o.error_maps.empty();
+  std::unique_ptr<RenderSession> reference;
+  if (!o.error_maps.empty()) {
+    RenderSession::Options ro;
+    ro.backend = "reference";
+    reference = std::make_unique<RenderSession>(scene, ro);
+    fs::create_directories(o.error_maps);
+  }
+  nlohmann::json all = nlohmann::json::array();
+  for (int f : frames) {
+    FrameBuffers fb;
+    const FrameStats stats = session.render(f, fb, outputs);
+    write_png(frame_path(o.out, f, several), to_rgba8(fb.color));
+    if (!o.depth.empty()) write_png(frame_path(o.depth, f, several), depth_to_rgba8(fb.depth));
+    if (!o.normals.empty()) write_png(frame_path(o.normals, f, several), normals_to_rgba8(fb.normal));
+    nlohmann::json j = nlohmann::json::parse(stats.to_json());
+    std::string error_line;
+    if (reference) {
+      FrameBuffers ref;
+      reference->render(f, ref, outputs);
+      const ImageError err = compare_frames(fb, ref, session.context().geometry().voxel_size);
+      const ErrorMaps maps = write_error_maps(fb, ref, session.context().geometry().voxel_size,
+                                              (fs::path(o.error_maps) / fmt::format("frame_{:04d}", f)).string());
+      j["error"] = nlohmann::json::parse(err.to_json());
+      error_line = fmt::format(", RMSE {:.4g}, SSIM {:.4f}, depth p99 {:.3g} voxels, coverage mismatch {}",
+                               err.rmse, err.ssim, err.depth_p99, err.coverage_mismatch);
+    }
+    all.push_back(j);
+    std::cout << fmt::format("frame {}: {} {}x{} in {} ({} rays/s on {} threads, {} samples, {} bricks, {} requests){}\n", f,
+                             session.backend().name, stats.width, stats.height, format_duration(stats.seconds),
+                             format_count(stats.seconds > 0 ? double(stats.counters.rays) / stats.seconds : 0),
+                             stats.threads, format_count(double(stats.counters.samples)),
+                             format_count(double(stats.counters.bricks)), stats.requests, error_line);
+  }
+  if (!o.stats.empty()) {
+    nlohmann::json j;
+    j["scene"] = o.scene;
+    j["backend"] = session.backend().name;
+    j["params"] = session.params().values();
+    j["frames"] = all;
+    j["cache"] = nlohmann::json::parse(session.cache().stats().to_json());
+    write_text(o.stats, j.dump(2) + "\n");
+  }
+}
+
+// --- bench ---------------------------------------------------------------------------------
+
+struct BenchOptions {
+  std::string scene, out = "out/bench", backends = "all", frame = "0";
+  std::vector<std::string> quality;
+  int warm = 5, cold = 3;
+  std::string size;
+};
+
+double median_of(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : (v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]));
+}
+double p95_of(std::vector<double> v) { return v.empty() ? 0 : percentile(v, 95); }
+
+/// Times `cold` frames on an empty cache and `warm` frames on a warmed one; returns the row and
+/// the last warm frame.
+BenchRow measure(RenderSession& session, int frame, int cold, int warm, const FrameOutputs& outputs, FrameBuffers& last) {
+  BenchRow row;
+  std::vector<double> cold_s, warm_s;
+  FrameStats stats;
+  for (int i = 0; i < cold; ++i) {
+    if (i > 0) session.reset_cache();
+    stats = session.render(frame, last, outputs);
+    cold_s.push_back(stats.seconds);
+  }
+  if (cold == 0) session.render(frame, last, outputs);  // warm the cache up
+  for (int i = 0; i < warm; ++i) {
+    stats = session.render(frame, last, outputs);
+    warm_s.push_back(stats.seconds);
+  }
+  row.cold_median_s = median_of(cold_s);
+  row.cold_p95_s = p95_of(cold_s);
+  row.warm_median_s = median_of(warm_s);
+  row.warm_p95_s = p95_of(warm_s);
+  row.cold_runs = cold;
+  row.warm_runs = warm;
+  row.width = stats.width;
+  row.height = stats.height;
+  row.threads = stats.threads;
+  const double t = warm > 0 ? row.warm_median_s : row.cold_median_s;
+  row.rays_per_second_per_core = t > 0 ? double(stats.counters.rays) / t / std::max(1, stats.threads) : 0;
+  row.samples = stats.counters.samples;
+  row.bricks = stats.counters.bricks;
+  row.bytes_read = stats.bytes_read;
+  return row;
+}
+
+std::string safe_name(const std::string& s) {
+  std::string out;
+  for (char c : s) out += (std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-') ? c : '_';
+  return out;
+}
+
+void run_bench(const BenchOptions& o) {
+  Scene scene = load_scene(o.scene);
+  if (!o.size.empty()) {
+    const auto wh = parse_int_list(o.size, 2, "--size");
+    if (wh[0] < 1 || wh[1] < 1 || wh[0] > 16384 || wh[1] > 16384)
+      throw Error(Errc::invalid_argument, "image size must be in 1..16384").with_field("--size");
+    scene.width = scene.camera.width = int(wh[0]);
+    scene.height = scene.camera.height = int(wh[1]);
+  }
+  const int frame = parse_frames(o.frame, scene.frames()).front();
+  // --quality NAME=V1,V2,...: the values to sweep for back ends that have the parameter NAME.
+  std::map<std::string, std::vector<double>> sweeps;
+  for (const std::string& q : o.quality) {
+    const size_t eq = q.find('=');
+    if (eq == std::string::npos || eq == 0) throw Error(Errc::invalid_argument, fmt::format("'{}' is not NAME=V1,V2,...", q)).with_field("--quality");
+    std::vector<double> values;
+    std::string rest = q.substr(eq + 1);
+    size_t start = 0;
+    while (start <= rest.size()) {
+      const size_t comma = rest.find(',', start);
+      const std::string item = rest.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      values.push_back(parse_assignment("v=" + item, "--quality").second);
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+    sweeps[q.substr(0, eq)] = values;
+  }
+
+  std::vector<std::string> names;
+  if (o.backends == "all") {
+    for (const BackendEntry& e : builtin_backends().entries())
+      if (e.info.name != "reference" && e.info.accepts(DataKind::structured, scene.mode)) names.push_back(e.info.name);
+  } else {
+    size_t start = 0;
+    while (start <= o.backends.size()) {
+      const size_t comma = o.backends.find(',', start);
+      names.push_back(o.backends.substr(start, comma == std::string::npos ? std::string::npos : comma - start));
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+    for (const auto& n : names) builtin_backends().find(n);  // unknown names fail before any rendering
+  }
+
+  fs::create_directories(fs::path(o.out) / "images");
+  FrameOutputs outputs;
+  outputs.depth = true;
+  outputs.normals = true;
+  BenchReport report;
+  report.title = fmt::format("{}: {} mode, {}x{}, frame {}, {}", fs::path(o.scene).filename().string(),
+                             to_string(scene.mode), scene.width, scene.height, frame, scene.dataset);
+
+  std::cout << fmt::format("bench {} ({}x{}, {} mode) -> {}\n", o.scene, scene.width, scene.height, to_string(scene.mode), o.out);
+  // The truth: the reference renderer, once cold and once warm.
+  FrameBuffers truth;
+  double voxel_size = 1;
+  {
+    RenderSession::Options ro;
+    ro.backend = "reference";
+    RenderSession ref(scene, ro);
+    voxel_size = ref.context().geometry().voxel_size;
+    BenchRow row = measure(ref, frame, 1, 1, outputs, truth);
+    row.backend = "reference";
+    row.is_reference = true;
+    row.error = compare_frames(truth, truth, voxel_size);
+    row.image = "images/reference.png";
+    write_png((fs::path(o.out) / row.image).string(), to_rgba8(truth.color));
+    std::cout << fmt::format("  reference            {:>10} cold {:>10} warm\n", format_duration(row.cold_median_s),
+                             format_duration(row.warm_median_s));
+    report.rows.push_back(row);
+  }
+  for (const std::string& name : names) {
+    const BackendInfo& info = builtin_backends().find(name).info;
+    if (!info.accepts(DataKind::structured, scene.mode)) {
+      std::cout << fmt::format("  {} does not render {} mode: skipped\n", name, to_string(scene.mode));
+      continue;
+    }
+    std::vector<double> values = info.quality_sweep;
+    std::string knob = info.quality_param;
+    for (const auto& [param, vals] : sweeps)
+      if (std::any_of(info.params.begin(), info.params.end(), [&](const BackendParam& p) { return p.name == param; })) {
+        knob = param;
+        values = vals;
+      }
+    if (knob.empty()) values = {0};
+    for (double v : values) {
+      RenderSession::Options so;
+      so.backend = name;
+      if (!knob.empty()) so.params[knob] = v;
+      RenderSession session(scene, so);
+      FrameBuffers fb;
+      BenchRow row = measure(session, frame, o.cold, o.warm, outputs, fb);
+      row.backend = name;
+      row.quality = knob.empty() ? "" : fmt::format("{}={:g}", knob, v);
+      row.quality_value = v;
+      row.error = compare_frames(fb, truth, voxel_size);
+      row.image = fmt::format("images/{}-{}.png", safe_name(name), safe_name(row.quality));
+      write_png((fs::path(o.out) / row.image).string(), to_rgba8(fb.color));
+      std::cout << fmt::format("  {:<10} {:<10} {:>10} cold {:>10} warm  RMSE {:.4g}  SSIM {:.4f}  {} rays/s/core\n", name,
+                               row.quality, format_duration(row.cold_median_s), format_duration(row.warm_median_s),
+                               row.error.rmse, row.error.ssim, format_count(row.rays_per_second_per_core));
+      report.rows.push_back(row);
+    }
+  }
+  const BenchReportPaths paths = write_bench_report(o.out, report);
+  std::cout << fmt::format("report: {}\n  table {}\n  chart {}\n  images {}\n", paths.markdown, paths.csv, paths.error_plot,
+                           paths.contact_sheet);
+}
+
+}  // namespace
+
+void add_render_commands(CLI::App& app) {
+  {
+    auto o = std::make_shared<RenderOptions>();
+    CLI::App* cmd = app.add_subcommand("render", "Render a scene (JSON) with its back end, or the one --backend names");
+    cmd->add_option("SCENE", o->scene, "Scene file (see scenes/example.json)");
+    cmd->add_option("-o,--out", o->out, "Colour PNG (camera paths: NAME_0000.png, ...)");
+    cmd->add_option("--depth", o->depth, "Depth PNG (near bright, far dark, misses black)");
+    cmd->add_option("--normals", o->normals, "Normal PNG ((n + 1) / 2 as RGB)");
+    cmd->add_option("--stats", o->stats, "Frame statistics and cache statistics as JSON");
+    cmd->add_option("--frames", o->frames, "Frames of a camera path: N, A-B or all (default 0)");
+    cmd->add_option("--backend", o->backend, "Back end to use instead of the scene's");
+    cmd->add_option("--set", o->sets, "Back-end parameter NAME=VALUE (repeatable)");
+    cmd->add_option("--error-maps", o->error_maps, "Also render the reference; print the error and write heat maps into this directory");
+    cmd->add_flag("--list-backends", o->list, "List the back ends, their modes and parameters");
+    cmd->callback([o] { run_render(*o); });
+  }
+  {
+    auto o = std::make_shared<BenchOptions>();
+    CLI::App* cmd = app.add_subcommand("bench", "Error against run time: every back end at a sweep of its quality knob, against the reference");
+    cmd->add_option("SCENE", o->scene, "Scene file")->required();
+    cmd->add_option("--backends", o->backends, "all, or a comma-separated list of back ends");
+    cmd->add_option("--quality", o->quality, "NAME=V1,V2,... values of a back-end parameter to sweep (default: each back end's own sweep)");
+    cmd->add_option("--warm", o->warm, "Warm-cache frames to time (median, p95)")->check(CLI::Range(1, 1000));
+    cmd->add_option("--cold", o->cold, "Cold-cache frames to time (each on a new, empty cache)")->check(CLI::Range(0, 1000));
+    cmd->add_option("--frame", o->frame, "Frame of the scene's camera path to render (default 0)");
+    cmd->add_option("--size", o->size, "Image size W,H instead of the scene's");
+    cmd->add_option("--out", o->out, "Report directory (bench.md, bench.csv, error-vs-time.png, contact-sheet.png, images/)");
+    cmd->callback([o] { run_bench(*o); });
+  }
+}
+
+}  // namespace brickyard::cli

@@ -1,0 +1,180 @@
+#pragma once
+/// @file cell_accessor.h
+/// @brief Reads the cells of one level of a store through the cache, remembering the brick
+/// it used last, so that the coherent accesses of a ray cost one comparison (OpenVDB's
+/// ValueAccessor, STYLE.md 5).
+///
+/// Not thread-safe: each thread (each tile) takes its own. It holds at most one pinned
+/// brick handle at a time and releases it when destroyed. Reads block (BrickCache::fetch)
+/// when a brick is not resident: for the reference renderer, the `raymarch` baseline and
+/// tools; the GPU-style back ends use non-blocking lookups instead.
+///
+/// Cell (i, j, k) is the cube between voxels (i, j, k) and (i+1, j+1, k+1); its corners
+/// beyond the last voxel clamp to it, so 1-voxel-thick volumes have flat cells.
+
+#include <algorithm>
+#include <cstdint>
+
+#include "cache/brick_cache.h"
+#include "renderers/common/frame.h"
+
+namespace brickyard {
+
+template <typename Stored>
+class CellAccessor {
+ public:
+  CellAccessor(BrickCache& cache, RayCounters& counters, int level)
+      : cache_(cache),
+        counters_(counters),
+        level_(level),
+        M_(cache.layout().brick_size),
+        A_(cache.format().apron),
+        E_(cache.format().edge()),
+        dims_(cache.layout().level_dims(level)),
+        bricks_(cache.layout().level_bricks(level)) {}
+
+  const Vec3s& dims() const { return dims_; }
+
+  /// @brief The 8 corner values of cell (i, j, k), index dx + 2 dy + 4 dz. The cell must lie
+  /// in the level (0 <= i < dims); corners past the last voxel clamp.
+  template <typename V>
+  void corners(int64_t i, int64_t j, int64_t k, V c[8]) {
+    if (A_ < 1) {  // no apron: corners may lie in neighbouring bricks
+      for (int n = 0; n < 8; ++n) c[n] = voxel<V>(i + (n & 1), j + ((n >> 1) & 1), k + ((n >> 2) & 1));
+      return;
+    }
+    const Vec3s b{std::min(i / M_, bricks_.x - 1), std::min(j / M_, bricks_.y - 1), std::min(k / M_, bricks_.z - 1)};
+    bind(b);
+    if (!data_) {
+      for (int n = 0; n < 8; ++n) c[n] = V(constant_);
+      return;
+    }
+    // The apron holds the forward neighbours, so every corner is inside this brick.
+    const int64_t x0 = i - b.x * M_ + A_, y0 = j - b.y * M_ + A_, z0 = k - b.z * M_ + A_;
+    const int64_t dx = i + 1 < dims_.x ? 1 : 0, dy = j + 1 < dims_.y ? E_ : 0, dz = k + 1 < dims_.z ? int64_t(E_) * E_ : 0;
+    const Stored* p = data_ + (z0 * E_ + y0) * E_ + x0;
+    c[0] = V(p[0]);
+    c[1] = V(p[dx]);
+    c[2] = V(p[dy]);
+    c[3] = V(p[dx + dy]);
+    c[4] = V(p[dz]);
+    c[5] = V(p[dx + dz]);
+    c[6] = V(p[dy + dz]);
+    c[7] = V(p[dx + dy + dz]);
+  }
+
+  /// @brief One voxel, clamped into the level.
+  template <typename V>
+  V voxel(int64_t i, int64_t j, int64_t k) {
+    i = std::clamp<int64_t>(i, 0, dims_.x - 1);
+    j = std::clamp<int64_t>(j, 0, dims_.y - 1);
+    k = std::clamp<int64_t>(k, 0, dims_.z - 1);
+    const Vec3s b{i / M_, j / M_, k / M_};
+    bind(b);
+    if (!data_) return V(constant_);
+    return V(data_[((k - b.z * M_ + A_) * E_ + (j - b.y * M_ + A_)) * E_ + (i - b.x * M_ + A_)]);
+  }
+
+ private:
+  void bind(const Vec3s& b) {
+    if (bound_ && b == brick_) return;
+    handle_.release();
+    const BrickKey key{uint32_t(level_), uint32_t(b.x), uint32_t(b.y), uint32_t(b.z)};
+    ++counters_.lookups;
+    ++counters_.bricks;
+    handle_ = cache_.lookup(key, 0, /*request_on_miss=*/false);
+    if (handle_.ready()) {
+      ++counters_.hits;
+    } else {
+      ++counters_.misses;
+      handle_ = cache_.fetch(key);  // throws the load's Error (corrupt or missing brick)
+    }
+    data_ = handle_.constant() ? nullptr : handle_.voxels<Stored>();
+    constant_ = handle_.constant_value();
+    brick_ = b;
+    bound_ = true;
+  }
+
+  BrickCache& cache_;
+  RayCounters& counters_;
+  int level_;
+  int64_t M_, A_, E_;
+  Vec3s dims_, bricks_;
+  BrickHandle handle_;
+  bool bound_ = false;
+  Vec3s brick_{-1};
+  const Stored* data_ = nullptr;
+  float constant_ = 0;
+};
+
+/// @brief Trilinear interpolation of corners c (index dx + 2 dy + 4 dz) at local u in [0,1]^3.
+template <typename V>
+inline V trilinear(const V c[8], V ux, V uy, V uz) {
+  const V x00 = c[0] + (c[1] - c[0]) * ux, x10 = c[2] + (c[3] - c[2]) * ux;
+  const V x01 = c[4] + (c[5] - c[4]) * ux, x11 = c[6] + (c[7] - c[6]) * ux;
+  const V y0 = x00 + (x10 - x00) * uy, y1 = x01 + (x11 - x01) * uy;
+  return y0 + (y1 - y0) * uz;
+}
+
+/// @brief Exact gradient of the trilinear interpolant at u, in voxel units (per voxel).
+template <typename V>
+inline Vec3<V> trilinear_gradient(const V c[8], V ux, V uy, V uz) {
+  const V vx = 1 - ux, vy = 1 - uy, vz = 1 - uz;
+  Vec3<V> g;
+  g.x = ((c[1] - c[0]) * vy + (c[3] - c[2]) * uy) * vz + ((c[5] - c[4]) * vy + (c[7] - c[6]) * uy) * uz;
+  g.y = ((c[2] - c[0]) * vx + (c[3] - c[1]) * ux) * vz + ((c[6] - c[4]) * vx + (c[7] - c[5]) * ux) * uz;
+  g.z = ((c[4] - c[0]) * vx + (c[5] - c[1]) * ux) * vy + ((c[6] - c[2]) * vx + (c[7] - c[3]) * ux) * uy;
+  return g;
+}
+
+/// @brief Continuous sampling of a level at voxel coordinates (clamped into the volume).
+template <typename Stored, typename V>
+class TrilinearSampler {
+ public:
+  TrilinearSampler(BrickCache& cache, RayCounters& counters, int level) : cells_(cache, counters, level) {
+    for (int a = 0; a < 3; ++a) last_cell_[a] = std::max<int64_t>(0, cells_.dims()[a] - 2);
+  }
+
+  V sample(const Vec3<V>& p) {
+    int64_t cell[3];
+    V u[3];
+    locate(p, cell, u);
+    load(cell);
+    return trilinear(c_, u[0], u[1], u[2]);
+  }
+  /// @brief Value and exact trilinear gradient (voxel units).
+  V sample(const Vec3<V>& p, Vec3<V>& gradient) {
+    int64_t cell[3];
+    V u[3];
+    locate(p, cell, u);
+    load(cell);
+    gradient = trilinear_gradient(c_, u[0], u[1], u[2]);
+    return trilinear(c_, u[0], u[1], u[2]);
+  }
+  CellAccessor<Stored>& cells() { return cells_; }
+  const Vec3s& dims() const { return cells_.dims(); }
+
+ private:
+  void locate(const Vec3<V>& p, int64_t cell[3], V u[3]) const {
+    for (int a = 0; a < 3; ++a) {
+      const V hi = V(cells_.dims()[a] - 1);
+      const V x = std::clamp(p[a], V(0), hi);  // NaN stays NaN and is caught below
+      int64_t i = x >= V(0) ? int64_t(x) : 0;
+      i = std::min(i, last_cell_[a]);
+      cell[a] = i;
+      u[a] = cells_.dims()[a] > 1 ? std::clamp(x - V(i), V(0), V(1)) : V(0);
+    }
+  }
+  void load(const int64_t cell[3]) {
+    if (cell[0] == cur_[0] && cell[1] == cur_[1] && cell[2] == cur_[2]) return;
+    cells_.corners(cell[0], cell[1], cell[2], c_);
+    cur_[0] = cell[0], cur_[1] = cell[1], cur_[2] = cell[2];
+  }
+
+  CellAccessor<Stored> cells_;
+  int64_t last_cell_[3];
+  int64_t cur_[3] = {-1, -1, -1};
+  V c_[8] = {};
+};
+
+}  // namespace brickyard

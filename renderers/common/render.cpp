@@ -1,0 +1,119 @@
+#include "renderers/common/render.h"
+
+#include <vector>
+
+#include <fmt/format.h>
+#include <tbb/task_arena.h>
+
+#include "core/parallel.h"
+#include "core/timing.h"
+
+namespace brickyard {
+
+FrameStats render_frame(Renderer& renderer, const RenderContext& context, const FrameSetup& setup, FrameBuffers& out) {
+  BrickCache& cache = context.cache();
+  FrameStats stats;
+  stats.frame = setup.frame;
+  stats.width = setup.width;
+  stats.height = setup.height;
+  stats.threads = tbb::this_task_arena::max_concurrency();
+  const CacheStats before = cache.stats();
+  Stopwatch frame_watch;
+
+  out = FrameBuffers(setup.width, setup.height, setup.outputs);
+  cache.frame_begin();
+  Stopwatch watch;
+  renderer.begin_frame(setup);
+  stats.add_phase("prepare", watch.seconds());
+
+  watch = Stopwatch();
+  const int tiles_x = (setup.width + kTileSize - 1) / kTileSize, tiles_y = (setup.height + kTileSize - 1) / kTileSize;
+  std::vector<RayCounters> tile_counters(size_t(tiles_x) * size_t(tiles_y));
+  parallel_for<int>(0, tiles_x * tiles_y, 1, [&](int begin, int end) {
+    for (int t = begin; t < end; ++t) {
+      const int tx = t % tiles_x, ty = t / tiles_x;
+      const Tile tile{tx * kTileSize, ty * kTileSize, std::min(setup.width, (tx + 1) * kTileSize),
+                      std::min(setup.height, (ty + 1) * kTileSize)};
+      renderer.render_tile(setup, tile, out, tile_counters[size_t(t)]);
+    }
+  });
+  for (const RayCounters& c : tile_counters) stats.counters += c;
+  stats.add_phase("render", watch.seconds());
+
+  watch = Stopwatch();
+  renderer.end_frame(setup, out);
+  const FrameReport report = cache.frame_end();
+  stats.add_phase("finish", watch.seconds());
+  stats.seconds = frame_watch.seconds();
+
+  const CacheStats after = cache.stats();
+  stats.requests = report.requests;
+  stats.uploads = after.uploads - before.uploads;
+  stats.stalls = after.stalls - before.stalls;
+  stats.bytes_read = after.l3_bytes_read - before.l3_bytes_read;
+  stats.bytes_decoded = after.l3_bytes_decoded - before.l3_bytes_decoded;
+  return stats;
+}
+
+CacheConfig cache_config(const Scene& scene) {
+  CacheConfig c;
+  c.l1_bytes = scene.cache.l1_bytes;
+  c.l2_bytes = scene.cache.l2_bytes;
+  c.l1_policy = scene.cache.l1_policy;
+  c.l2_policy = scene.cache.l2_policy;
+  c.loader_threads = scene.cache.loader_threads;
+  return c;
+}
+
+namespace {
+std::map<std::string, double> merged_params(const Scene& scene, const RenderSession::Options& o, const std::string& backend) {
+  std::map<std::string, double> p;
+  if (backend == scene.backend) p = scene.backend_params;  // a scene's parameters belong to its back end
+  for (const auto& [k, v] : o.params) p[k] = v;
+  return p;
+}
+}  // namespace
+
+RenderSession::RenderSession(const Scene& scene, const Options& options)
+    : scene_(scene),
+      options_(options),
+      entry_(&builtin_backends().find(options.backend.empty() ? scene.backend : options.backend)),
+      params_(entry_->info, merged_params(scene_, options_, entry_->info.name),
+              options.backend.empty() || options.backend == scene.backend ? scene.file : "") {
+  if (!entry_->info.accepts(DataKind::structured, scene_.mode))
+    throw Error(Errc::invalid_argument, fmt::format("back end '{}' does not render {} mode on structured volumes",
+                                                    entry_->info.name, to_string(scene_.mode)))
+        .with_file(scene_.file)
+        .with_field("mode");
+  store_ = std::make_unique<BrickStore>(scene_.dataset);
+  build();
+}
+
+RenderSession::~RenderSession() = default;
+
+void RenderSession::build() {
+  renderer_.reset();
+  context_.reset();
+  cache_.reset();
+  cache_ = std::make_unique<BrickCache>(*store_, options_.cache ? *options_.cache : cache_config(scene_));
+  context_ = std::make_unique<RenderContext>(scene_, *cache_);
+  renderer_ = entry_->create(*context_, params_);
+}
+
+void RenderSession::reset_cache() { build(); }
+
+Camera RenderSession::camera(int frame) const {
+  return scene_.camera.at(std::clamp(frame, 0, scene_.frames() - 1)).in_box(context_->geometry().world);
+}
+
+FrameStats RenderSession::render(int frame, FrameBuffers& out, const FrameOutputs& outputs) {
+  FrameSetup setup;
+  setup.camera = camera(frame);
+  setup.width = scene_.width;
+  setup.height = scene_.height;
+  setup.frame = frame;
+  setup.outputs = outputs;
+  return render_frame(*renderer_, *context_, setup, out);
+}
+
+}  // namespace brickyard

@@ -1,0 +1,65 @@
+#pragma once
+/// @file render.h
+/// @brief Rendering a scene: open its store, build its cache and the one back end it names
+/// (and nothing else), and render frames in parallel over image tiles.
+
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "renderers/common/renderer.h"
+
+namespace brickyard {
+
+inline constexpr int kTileSize = 16;
+
+/// @brief Renders one frame with `renderer`: cache.frame_begin(), begin_frame(), tiles in
+/// parallel (TBB), end_frame(), cache.frame_end(). Fills `out` (allocated here) and returns
+/// the frame's statistics.
+FrameStats render_frame(Renderer& renderer, const RenderContext& context, const FrameSetup& setup, FrameBuffers& out);
+
+/// @brief A scene ready to render: its store, its cache, its back end.
+class RenderSession {
+ public:
+  struct Options {
+    std::string backend;                      ///< "" : the scene's
+    std::map<std::string, double> params;     ///< override or add to the scene's parameters
+    std::optional<CacheConfig> cache;         ///< "" : from the scene's budgets
+  };
+
+  /// @throws Error naming the store or the back end; DataKind/mode mismatches name the key.
+  RenderSession(const Scene& scene, const Options& options);
+  RenderSession(const Scene& scene) : RenderSession(scene, Options{}) {}
+  ~RenderSession();
+
+  const Scene& scene() const { return scene_; }
+  const BackendInfo& backend() const { return entry_->info; }
+  const BackendParams& params() const { return params_; }
+  BrickCache& cache() { return *cache_; }
+  const BrickStore& store() const { return *store_; }
+  const RenderContext& context() const { return *context_; }
+
+  /// @brief The camera of frame f, in world coordinates.
+  Camera camera(int frame) const;
+  FrameStats render(int frame, FrameBuffers& out, const FrameOutputs& outputs = {});
+  /// @brief Drops every cached brick (a new cache and back end): the next frame is cold.
+  void reset_cache();
+
+ private:
+  void build();
+
+  Scene scene_;
+  Options options_;
+  const BackendEntry* entry_ = nullptr;
+  BackendParams params_;
+  std::unique_ptr<BrickStore> store_;
+  std::unique_ptr<BrickCache> cache_;
+  std::unique_ptr<RenderContext> context_;
+  std::unique_ptr<Renderer> renderer_;
+};
+
+/// @brief The cache configuration a scene asks for.
+CacheConfig cache_config(const Scene& scene);
+
+}  // namespace brickyard

@@ -1,0 +1,84 @@
+#include "renderers/common/renderer.h"
+
+#include <algorithm>
+
+#include <fmt/format.h>
+
+namespace brickyard {
+
+std::string_view to_string(DataKind k) { return k == DataKind::structured ? "structured" : "tetrahedral"; }
+
+bool BackendInfo::accepts(DataKind kind, RenderMode mode) const {
+  return std::find(kinds.begin(), kinds.end(), kind) != kinds.end() &&
+         std::find(modes.begin(), modes.end(), mode) != modes.end();
+}
+
+BackendParams::BackendParams(const BackendInfo& info, const std::map<std::string, double>& given, const std::string& file) {
+  for (const BackendParam& p : info.params) values_[p.name] = p.default_value;
+  for (const auto& [name, value] : given) {
+    auto it = std::find_if(info.params.begin(), info.params.end(), [&](const BackendParam& p) { return p.name == name; });
+    if (it == info.params.end()) {
+      std::string known;
+      for (const BackendParam& p : info.params) known += fmt::format("{}'{}'", known.empty() ? "" : ", ", p.name);
+      Error e(Errc::invalid_argument, fmt::format("back end '{}' has no parameter '{}' (its parameters: {})", info.name,
+                                                  name, known.empty() ? "none" : known));
+      e.with_field(fmt::format("backend.params.{}", name));
+      if (!file.empty()) e.with_file(file);
+      throw e;
+    }
+    if (!(value >= it->lo && value <= it->hi)) {
+      Error e(Errc::invalid_argument, fmt::format("{} is outside [{}, {}]", value, it->lo, it->hi));
+      e.with_field(fmt::format("backend.params.{}", name));
+      if (!file.empty()) e.with_file(file);
+      throw e;
+    }
+    values_[name] = value;
+  }
+}
+
+double BackendParams::operator[](const std::string& name) const {
+  auto it = values_.find(name);
+  BY_CHECK(it != values_.end());  // back ends read only parameters they declared
+  return it->second;
+}
+
+RenderContext::RenderContext(const Scene& scene, BrickCache& cache) : scene_(scene), cache_(cache) {
+  const Manifest& m = cache.store().manifest();
+  VolumeGeometry& g = geometry_;
+  g.dims = m.dims;
+  g.origin = m.origin;
+  g.spacing = m.spacing;
+  const Vec3d last = Vec3d(m.dims - Vec3s(1));
+  g.world = Box3d(m.origin, m.origin + m.spacing * last);
+  g.voxel_size = min_component(m.spacing);
+  g.voxel_clip = Box3d(Vec3d(0.0), last);
+  if (scene.clip) {
+    const Box3d c{g.to_voxel(g.from_normalised(scene.clip->lo)), g.to_voxel(g.from_normalised(scene.clip->hi))};
+    g.voxel_clip = g.voxel_clip.intersect(c);
+  }
+}
+
+void BackendRegistry::add(BackendEntry entry) {
+  BY_CHECK(!contains(entry.info.name));
+  entries_.push_back(std::move(entry));
+}
+
+bool BackendRegistry::contains(const std::string& name) const {
+  return std::any_of(entries_.begin(), entries_.end(), [&](const BackendEntry& e) { return e.info.name == name; });
+}
+
+const BackendEntry& BackendRegistry::find(const std::string& name) const {
+  for (const BackendEntry& e : entries_)
+    if (e.info.name == name) return e;
+  std::string known;
+  for (const BackendEntry& e : entries_) known += fmt::format("{}'{}'", known.empty() ? "" : ", ", e.info.name);
+  throw Error(Errc::invalid_argument, fmt::format("unknown back end '{}' (known: {})", name, known)).with_field("backend");
+}
+
+std::vector<std::string> BackendRegistry::names() const {
+  std::vector<std::string> out;
+  for (const BackendEntry& e : entries_) out.push_back(e.info.name);
+  return out;
+}
+
+}  // namespace brickyard

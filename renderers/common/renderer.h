@@ -1,0 +1,151 @@
+#pragma once
+/// @file renderer.h
+/// @brief The interface every back end implements, what it is given (RenderContext) and how
+/// it declares itself (BackendInfo).
+///
+/// Life of a back end (STYLE.md 4, configure, commit, then render read-only):
+/// 1. its factory is called with the RenderContext and its resolved parameters: it builds
+///    whatever the scene needs, and nothing else;
+/// 2. per frame, begin_frame() runs once on one thread (level-of-detail refinement, uploads);
+/// 3. render_tile() runs concurrently on disjoint tiles: it is const and must be safe to call
+///    from many threads; a pixel's value must not depend on which thread or in which order
+///    tiles are rendered, so the image is independent of the thread count;
+/// 4. end_frame() runs once after every tile (visibility and usage feedback).
+/// Virtual calls happen per tile, never per sample (STYLE.md 3).
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cache/brick_cache.h"
+#include "core/camera.h"
+#include "renderers/common/frame.h"
+#include "renderers/common/scene.h"
+
+namespace brickyard {
+
+enum class DataKind : uint8_t { structured, tetrahedral };
+std::string_view to_string(DataKind k);
+
+struct BackendParam {
+  std::string name;
+  double default_value = 0;
+  double lo = 0, hi = 0;  ///< accepted range
+  std::string doc;
+};
+
+/// @brief What a back end declares about itself.
+struct BackendInfo {
+  std::string name;
+  std::string description;
+  std::vector<DataKind> kinds;
+  std::vector<RenderMode> modes;
+  std::vector<BackendParam> params;
+  /// The parameter `brickyard bench` sweeps, and its default sweep from fast to accurate.
+  std::string quality_param;
+  std::vector<double> quality_sweep;
+
+  bool accepts(DataKind kind, RenderMode mode) const;
+};
+
+/// @brief Resolved parameter values of one back end: every declared parameter, by name.
+class BackendParams {
+ public:
+  /// @brief Defaults overridden by `given`; an undeclared name or an out-of-range value is
+  /// Error(invalid_argument) naming it (and `file`, when the values came from a scene).
+  BackendParams(const BackendInfo& info, const std::map<std::string, double>& given, const std::string& file = "");
+  double operator[](const std::string& name) const;
+  const std::map<std::string, double>& values() const { return values_; }
+
+ private:
+  std::map<std::string, double> values_;
+};
+
+/// @brief The finest level's geometry: world <-> voxel coordinates (voxel i of axis a sits at
+/// origin[a] + i * spacing[a]; the volume spans voxel coordinates [0, dims - 1]).
+struct VolumeGeometry {
+  Vec3s dims{0};
+  Vec3d origin{0.0}, spacing{1.0};
+  Box3d world;       ///< the volume's bounding box in world coordinates
+  Box3d voxel_clip;  ///< the region rendered, in voxel coordinates (volume box and clip box)
+  double voxel_size = 1;  ///< the smallest spacing: depth errors are reported in these units
+
+  Vec3d to_voxel(const Vec3d& w) const { return (w - origin) / spacing; }
+  Vec3d to_world(const Vec3d& v) const { return origin + v * spacing; }
+  /// @brief A point in coordinates normalised to the volume's box, in world coordinates.
+  Vec3d from_normalised(const Vec3d& n) const { return world.lo + n * world.extent(); }
+};
+
+/// @brief Everything shared by the back ends of one scene, immutable while frames render.
+class RenderContext {
+ public:
+  RenderContext(const Scene& scene, BrickCache& cache);
+
+  const Scene& scene() const { return scene_; }
+  BrickCache& cache() const { return cache_; }
+  const StoreLayout& layout() const { return cache_.layout(); }
+  const NodeTable& nodes() const { return cache_.nodes(); }
+  const Manifest& manifest() const { return cache_.store().manifest(); }
+  const VolumeGeometry& geometry() const { return geometry_; }
+  /// @brief Whether a node can contribute to the image: its value range meets an isovalue or
+  /// the transfer function's non-zero opacity (the scene's value filter). Nodes that cannot are
+  /// never fetched.
+  bool node_visible(const NodeRecord& n) const { return scene_.value_range_visible(n.min, n.max); }
+  /// @brief Whether the renderer must compute gradients: shading is on, or normals are asked for.
+  bool needs_gradients(const FrameOutputs& outputs) const {
+    return outputs.normals || (scene_.shading.lit() && scene_.mode != RenderMode::mip);
+  }
+
+ private:
+  const Scene& scene_;
+  BrickCache& cache_;
+  VolumeGeometry geometry_;
+};
+
+/// @brief One frame to render: the camera in world coordinates and what to produce.
+struct FrameSetup {
+  Camera camera;
+  int width = 0, height = 0;
+  int frame = 0;
+  FrameOutputs outputs;
+};
+
+struct Tile {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  ///< pixels [x0, x1) x [y0, y1)
+};
+
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+  virtual void begin_frame(const FrameSetup& setup) { (void)setup; }
+  virtual void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const = 0;
+  virtual void end_frame(const FrameSetup& setup, const FrameBuffers& out) { (void)setup, (void)out; }
+};
+
+using BackendFactory = std::function<std::unique_ptr<Renderer>(const RenderContext&, const BackendParams&)>;
+
+struct BackendEntry {
+  BackendInfo info;
+  BackendFactory create;
+};
+
+/// @brief Back ends by name (STYLE.md 2): explicitly registered, an unknown name is an error
+/// listing the known ones.
+class BackendRegistry {
+ public:
+  void add(BackendEntry entry);
+  const BackendEntry& find(const std::string& name) const;
+  bool contains(const std::string& name) const;
+  const std::vector<BackendEntry>& entries() const { return entries_; }
+  std::vector<std::string> names() const;
+
+ private:
+  std::vector<BackendEntry> entries_;
+};
+
+/// @brief The built-in back ends (registered on first use, in renderers/common/registry.cpp).
+const BackendRegistry& builtin_backends();
+
+}  // namespace brickyard

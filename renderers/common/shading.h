@@ -1,0 +1,77 @@
+#pragma once
+/// @file shading.h
+/// @brief Blinn-Phong shading shared by every back end and the reference, so that image
+/// differences come from sampling and reconstruction, never from two lighting models.
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "renderers/common/renderer.h"
+
+namespace brickyard {
+
+class ShadingModel {
+ public:
+  ShadingModel(const Shading& s, const VolumeGeometry& g)
+      : s_(s),
+        light_position_(g.from_normalised(s.light_position)),
+        light_direction_(normalize(s.light_direction)) {}
+
+  bool lit() const { return s_.lit(); }
+  /// @brief Unit vector from p towards the light, and the distance to it (infinite for
+  /// directional lights). The headlight sits at the eye.
+  Vec3d to_light(const Vec3d& p, const Vec3d& eye, double& distance) const {
+    switch (s_.light) {
+      case LightKind::headlight: {
+        const Vec3d d = eye - p;
+        distance = length(d);
+        return distance > 0 ? d / distance : Vec3d(0, 0, 1);
+      }
+      case LightKind::point: {
+        const Vec3d d = light_position_ - p;
+        distance = length(d);
+        return distance > 0 ? d / distance : Vec3d(0, 0, 1);
+      }
+      case LightKind::directional:
+        distance = std::numeric_limits<double>::infinity();
+        return -light_direction_;
+      case LightKind::none: break;
+    }
+    distance = 0;
+    return Vec3d(0.0);
+  }
+
+  /// @brief Shaded colour of a surface point of colour `base` with unit normal n facing the
+  /// viewer, unit vector `view` towards the eye, unit `light` towards the light. Two-sided.
+  Vec3f shade(const Vec3f& base, const Vec3d& n, const Vec3d& view, const Vec3d& light, bool shadowed) const {
+    if (!lit()) return base;
+    float diffuse = 0, specular = 0;
+    if (!shadowed) {
+      const double nl = std::fabs(dot(n, light));
+      diffuse = float(nl);
+      const Vec3d h = normalize(light + view);
+      const double nh = std::fabs(dot(n, h));
+      specular = nh > 0 ? float(std::pow(nh, double(s_.shininess))) : 0.0f;
+    }
+    const Vec3f lc = s_.light_color;
+    Vec3f out = base * (s_.ambient + s_.diffuse * diffuse) * lc + lc * (s_.specular * specular);
+    out.x = std::min(out.x, 1.0f), out.y = std::min(out.y, 1.0f), out.z = std::min(out.z, 1.0f);
+    return out;
+  }
+
+ private:
+  const Shading& s_;
+  Vec3d light_position_, light_direction_;
+};
+
+/// @brief The unit normal of a field gradient g (world units), facing against the ray
+/// direction; the ray's reverse where the gradient vanishes.
+inline Vec3d facing_normal(const Vec3d& gradient, const Vec3d& ray_dir) {
+  const double len = length(gradient);
+  if (!(len > 0) || !std::isfinite(len)) return -ray_dir;
+  const Vec3d n = gradient / len;
+  return dot(n, ray_dir) > 0 ? -n : n;
+}
+
+}  // namespace brickyard

@@ -1,0 +1,298 @@
+// `raymarch`: the baseline. Plain single-resolution, fixed-step ray marching through the
+// finest level in single precision, with empty-space skipping from the node table: the ray
+// walks the finest level's bricks (3D DDA) and samples only bricks whose value range can
+// contribute (an isovalue inside it, non-zero opacity by the transfer function's summed-area
+// table). Samples sit at fixed positions t0 + (k + 1/2) dt along the ray whatever is skipped,
+// so skipping changes the cost, never the image. Data comes through the cache with blocking
+// fetches. It is the yardstick the paper back ends must beat at equal error.
+
+#include <cmath>
+#include <limits>
+#include <memory>
+
+#include "renderers/common/cell_accessor.h"
+#include "renderers/common/grid_walk.h"
+#include "renderers/common/renderer.h"
+#include "renderers/common/shading.h"
+
+namespace brickyard {
+namespace {
+
+struct RaymarchParams {
+  double step = 0.5;         // voxels, before the scene's step_factor and sampling_rate
+  int refine = 6;            // bisection steps refining an isosurface crossing
+};
+
+template <typename Stored>
+class RaymarchRenderer final : public Renderer {
+ public:
+  RaymarchRenderer(const RenderContext& ctx, const RaymarchParams& p)
+      : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), p_(p), shading_(scene_.shading, geo_) {
+    finest_ = ctx.layout().finest();
+    bricks_ = ctx.layout().level_bricks(finest_);
+    M_ = double(ctx.layout().brick_size);
+    step_ = p.step * scene_.quality.step_factor / (scene_.mode == RenderMode::iso ? 1.0 : scene_.sampling_rate);
+    // Node visibility per finest brick, decided once: the render loop reads a byte.
+    const auto& level = ctx.nodes().level(finest_);
+    visible_.resize(level.size());
+    for (size_t i = 0; i < level.size(); ++i) visible_[i] = ctx.node_visible(level[i]);
+  }
+
+  void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
+    Marcher m(*this, setup, counters);
+    for (int y = tile.y0; y < tile.y1; ++y)
+      for (int x = tile.x0; x < tile.x1; ++x) m.pixel(x, y, out);
+  }
+
+ private:
+  struct Marcher {
+    const RaymarchRenderer& r;
+    const FrameSetup& setup;
+    RayCounters& counters;
+    TrilinearSampler<Stored, float> sampler;
+    const bool gradients;
+
+    Marcher(const RaymarchRenderer& renderer, const FrameSetup& s, RayCounters& c)
+        : r(renderer), setup(s), counters(c), sampler(r.ctx_.cache(), c, r.finest_), gradients(r.ctx_.needs_gradients(s.outputs)) {}
+
+    /// Calls f(t) at every fixed sample position t0 + (k + 1/2) dt inside a visible brick,
+    /// in order, until f returns false. `entered(t)` is called when the ray enters a visible
+    /// brick after skipping (the last sample before it is unknown).
+    template <typename OnSample, typename OnEnter>
+    void march(const Vec3d& o, const Vec3d& d, double t0, double t1, double dt, OnSample&& on_sample, OnEnter&& entered) {
+      const double inv_m = 1.0 / r.M_;
+      bool skipped = true;
+      walk_cells(o * inv_m, d * inv_m, t0, t1, r.bricks_, [&](const int64_t b[3], double ta, double tb) {
+        ++counters.nodes;
+        const size_t index = size_t((b[2] * r.bricks_.y + b[1]) * r.bricks_.x + b[0]);
+        if (!r.visible_[index]) {
+          skipped = true;
+          return true;
+        }
+        if (skipped && !entered(ta)) return false;
+        skipped = false;
+        double k = std::ceil((ta - t0) / dt - 0.5);
+        for (double t = t0 + (std::max(k, 0.0) + 0.5) * dt; t < tb; t += dt)
+          if (!on_sample(t)) return false;
+        return true;
+      });
+    }
+
+    float sample(const Vec3d& o, const Vec3d& d, double t) {
+      ++counters.samples;
+      return sampler.sample(Vec3f(o + d * t));
+    }
+
+    Vec3d gradient_world(const Vec3d& q) {
+      ++counters.gradients;
+      const Vec3f p(q);
+      Vec3f g;
+      switch (r.scene_.shading.normals) {
+        case NormalMethod::analytic: sampler.sample(p, g); break;
+        case NormalMethod::central:
+          for (int a = 0; a < 3; ++a) {
+            Vec3f e(0.0f);
+            e[a] = 1;
+            g[a] = 0.5f * (sampler.sample(p + e) - sampler.sample(p - e));
+          }
+          counters.samples += 6;
+          break;
+        case NormalMethod::forward: {
+          const float f0 = sampler.sample(p);
+          for (int a = 0; a < 3; ++a) {
+            Vec3f e(0.0f);
+            e[a] = 1;
+            g[a] = sampler.sample(p + e) - f0;
+          }
+          counters.samples += 4;
+          break;
+        }
+      }
+      return Vec3d(g) / r.geo_.spacing;
+    }
+
+    void pixel(int x, int y, FrameBuffers& out) {
+      ++counters.rays;
+      const Rayd world_ray = setup.camera.ray(x + 0.5, y + 0.5, setup.width, setup.height);
+      const Vec3d o = r.geo_.to_voxel(world_ray.org), d = world_ray.dir / r.geo_.spacing;
+      Interval<double> span = intersect(Rayd(o, d), r.geo_.voxel_clip);
+      span.t0 = std::max(span.t0, 0.0);
+      Vec3f color = r.scene_.background;
+      float alpha = 0;
+      double depth = std::numeric_limits<double>::infinity();
+      Vec3d normal(0.0);
+      if (!span.empty()) {
+        const double dt = r.step_ / length(d);
+        switch (r.scene_.mode) {
+          case RenderMode::iso: iso(world_ray, o, d, span, dt, color, alpha, depth, normal); break;
+          case RenderMode::dvr: dvr(world_ray, o, d, span, dt, color, alpha, depth, normal); break;
+          case RenderMode::mip: mip(o, d, span, dt, color, alpha, depth); break;
+        }
+      }
+      out.color(x, y) = {color.x, color.y, color.z, alpha};
+      if (!out.depth.empty()) out.depth(x, y) = float(depth);
+      if (!out.normal.empty()) out.normal(x, y) = Vec3f(normal);
+    }
+
+    /// First crossing of any isosurface in [t0, t1]: t and surface index, or surface -1.
+    std::pair<double, int> crossing(const Vec3d& o, const Vec3d& d, double t0, double t1, double dt) {
+      const auto& surfaces = r.scene_.isosurfaces;
+      const size_t ns = surfaces.size();
+      float prev[4];
+      double t_prev = 0;
+      bool have_prev = false;
+      double hit_t = std::numeric_limits<double>::infinity();
+      int hit_s = -1;
+      auto take = [&](double t) {
+        const float v = sample(o, d, t);
+        for (size_t s = 0; s < ns; ++s) {
+          const float g = v - float(surfaces[s].value);
+          if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
+            // Bisection between the two samples.
+            double lo = t_prev, hi = t;
+            float glo = prev[s];
+            for (int it = 0; it < r.p_.refine && g != 0; ++it) {
+              const double mid = 0.5 * (lo + hi);
+              const float gm = sample(o, d, mid) - float(surfaces[s].value);
+              if ((gm < 0) == (glo < 0)) lo = mid, glo = gm;
+              else hi = mid;
+            }
+            const double th = g == 0 ? t : 0.5 * (lo + hi);
+            if (th < hit_t) hit_t = th, hit_s = int(s);
+          }
+          prev[s] = g;
+        }
+        t_prev = t;
+        have_prev = true;
+        return hit_s < 0;
+      };
+      march(o, d, t0, t1, dt, take, [&](double ta) {
+        have_prev = false;
+        return take(ta + 1e-4 * dt);  // just inside the visible brick
+      });
+      return {hit_t, hit_s};
+    }
+
+    void iso(const Rayd& world_ray, const Vec3d& o, const Vec3d& d, Interval<double> span, double dt, Vec3f& color,
+             float& alpha, double& depth, Vec3d& normal) {
+      const auto [t, s] = crossing(o, d, span.t0, span.t1, dt);
+      if (s < 0) return;
+      depth = t;
+      alpha = 1;
+      color = r.scene_.isosurfaces[size_t(s)].color;
+      if (!gradients) return;
+      const Vec3d n = facing_normal(gradient_world(o + d * t), world_ray.dir);
+      if (setup.outputs.normals) normal = n;
+      if (!r.shading_.lit()) return;
+      const Vec3d p_world = world_ray.at(t);
+      double light_distance;
+      const Vec3d l = r.shading_.to_light(p_world, setup.camera.eye, light_distance);
+      bool shadowed = false;
+      if (r.scene_.shading.casts_shadows()) {
+        ++counters.shadow_rays;
+        const Vec3d so = r.geo_.to_voxel(p_world), sd = l / r.geo_.spacing;
+        Interval<double> ss = intersect(Rayd(so, sd), r.geo_.voxel_clip);
+        ss.t0 = std::max(ss.t0, r.step_ * r.geo_.voxel_size);  // leave the surface: one step
+        ss.t1 = std::min(ss.t1, light_distance);
+        shadowed = !ss.empty() && crossing(so, sd, ss.t0, ss.t1, r.step_ / length(sd)).second >= 0;
+      }
+      color = r.shading_.shade(color, n, -world_ray.dir, l, shadowed);
+    }
+
+    void dvr(const Rayd& world_ray, const Vec3d& o, const Vec3d& d, Interval<double> span, double dt, Vec3f& color,
+             float& alpha, double& depth, Vec3d& normal) {
+      const TransferFunction& tf = r.scene_.transfer_function;
+      const float h = float(r.step_);
+      const float stop = float(r.scene_.quality.termination_opacity);
+      Vec3f accum(0.0f);
+      float a_acc = 0;
+      const bool lit = r.shading_.lit();
+      march(o, d, span.t0, span.t1, dt, [&](double t) {
+        const Vec3f q(o + d * t);
+        ++counters.samples;
+        const float v = sampler.sample(q);
+        Vec3f c;
+        float a_tf;
+        tf.eval(v, c, a_tf);
+        if (!(a_tf > 0)) return true;
+        const float a = 1 - std::pow(1 - a_tf, h);
+        Vec3d n(0.0);
+        if (gradients) n = facing_normal(gradient_world(Vec3d(q)), world_ray.dir);
+        if (lit) {
+          double light_distance;
+          c = r.shading_.shade(c, n, -world_ray.dir, r.shading_.to_light(world_ray.at(t), setup.camera.eye, light_distance), false);
+        }
+        accum += c * ((1 - a_acc) * a);
+        a_acc += (1 - a_acc) * a;
+        if (depth == std::numeric_limits<double>::infinity() && a_acc >= 0.5f) {
+          depth = t;
+          if (setup.outputs.normals) normal = n;
+        }
+        return a_acc < stop;
+      }, [](double) { return true; });
+      color = accum + r.scene_.background * (1 - a_acc);
+      alpha = a_acc;
+    }
+
+    void mip(const Vec3d& o, const Vec3d& d, Interval<double> span, double dt, Vec3f& color, float& alpha, double& depth) {
+      float best = -std::numeric_limits<float>::infinity();
+      double best_t = 0;
+      march(o, d, span.t0, span.t1, dt, [&](double t) {
+        const float v = sample(o, d, t);
+        if (v > best) best = v, best_t = t;
+        return true;
+      }, [](double) { return true; });
+      if (best == -std::numeric_limits<float>::infinity()) return;
+      depth = best_t;
+      Vec3f c;
+      float a = 1;
+      if (!r.scene_.transfer_function.empty()) {
+        r.scene_.transfer_function.eval(best, c, a);
+      } else {
+        const double lo = r.ctx_.manifest().min_value, hi = r.ctx_.manifest().max_value;
+        c = Vec3f(float(hi > lo ? std::clamp((double(best) - lo) / (hi - lo), 0.0, 1.0) : 1.0));
+      }
+      color = c * a + r.scene_.background * (1 - a);
+      alpha = a;
+    }
+  };
+
+  const RenderContext& ctx_;
+  const Scene& scene_;
+  const VolumeGeometry& geo_;
+  RaymarchParams p_;
+  ShadingModel shading_;
+  int finest_ = 0;
+  Vec3s bricks_;
+  double M_ = 32;
+  double step_ = 0.5;
+  std::vector<uint8_t> visible_;
+};
+
+}  // namespace
+
+BackendEntry raymarch_backend() {
+  BackendEntry e;
+  e.info.name = "raymarch";
+  e.info.description = "baseline: single-resolution fixed-step ray marching at the finest level, float, "
+                       "empty-space skipping by the node table";
+  e.info.kinds = {DataKind::structured};
+  e.info.modes = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
+  e.info.params = {
+      {"step", 0.5, 1e-3, 16.0, "sampling step in voxels (times the scene's quality.step_factor; DVR/MIP: divided by sampling_rate)"},
+      {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing between two samples"},
+  };
+  e.info.quality_param = "step";
+  e.info.quality_sweep = {2.0, 1.0, 0.5, 0.25, 0.125};
+  e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
+    RaymarchParams rp;
+    rp.step = p["step"];
+    rp.refine = int(p["refine"]);
+    return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
+      return std::make_unique<RaymarchRenderer<decltype(stored)>>(ctx, rp);
+    });
+  };
+  return e;
+}
+
+}  // namespace brickyard
