@@ -20,6 +20,7 @@
 #include "cache/trace.h"
 #include "core/error.h"
 #include "core/parallel.h"
+#include "core/plot.h"
 #include "core/raw_volume.h"
 #include "core/units.h"
 
@@ -104,28 +105,16 @@ std::vector<SizeSpec> parse_sizes(const std::string& text, uint64_t working_set)
 
 void write_plot(const std::string& png, const std::string& csv_for_plot, const std::vector<std::string>& policies,
                 const std::string& title) {
-  const std::string script_path = png + ".gp";
-  {
-    std::ofstream gp(script_path);
-    gp << "set terminal pngcairo size 900,600 font 'sans,11'\n"
-       << "set output '" << png << ".partial'\n"
-       << "set datafile separator ','\n"
-       << "set title '" << title << "' noenhanced\n"
-       << "set logscale x\nset xlabel 'cache size (fraction of the working set)'\nset ylabel 'miss ratio'\n"
-       << "set yrange [0:1]\nset grid\nset key outside right\nset format x '%g'\n"
-       << "plot ";
-    for (size_t i = 0; i < policies.size(); ++i)
-      gp << (i ? ", " : "") << "'" << csv_for_plot << "' using (strcol(1) eq '" << policies[i]
-         << "' ? $2 : 1/0):6 with linespoints lw 2 title '" << policies[i] << "'";
-    gp << "\n";
-  }
-  const int rc = std::system(fmt::format("gnuplot '{}' 2>&1", script_path).c_str());
-  std::filesystem::remove(script_path);
-  if (rc != 0) {
-    std::filesystem::remove(png + ".partial");
-    throw Error(Errc::unsupported, "gnuplot failed or is missing (apt-get install gnuplot-nox)").with_file(png);
-  }
-  std::filesystem::rename(png + ".partial", png);
+  std::string body = "set datafile separator ','\n";
+  body += fmt::format("set title {} noenhanced\n", gnuplot_quote(title));
+  body += "set logscale x\nset xlabel 'cache size (fraction of the working set)'\nset ylabel 'miss ratio'\n"
+          "set yrange [0:1]\nset grid\nset key outside right\nset format x '%g'\n"
+          "plot ";
+  for (size_t i = 0; i < policies.size(); ++i)
+    body += fmt::format("{}{} using (strcol(1) eq {} ? $2 : 1/0):6 with linespoints lw 2 title {}", i ? ", " : "",
+                        gnuplot_quote(csv_for_plot), gnuplot_quote(policies[i]), gnuplot_quote(policies[i]));
+  body += "\n";
+  run_gnuplot(body, png, 900, 600);
 }
 
 void run_cachebench(const CachebenchOptions& o) {

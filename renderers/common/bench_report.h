@@ -1,0 +1,78 @@
+#pragma once
+/// @file bench_report.h
+/// @brief The report of `brickyard bench`: every back end at every setting of its quality
+/// knob, its cold- and warm-cache frame times, and its image error against the reference
+/// renderer, as a CSV, a Markdown page and two gnuplot charts (error against time, and a
+/// contact sheet of the images).
+///
+/// Every file is written under a temporary name and renamed into place, so an interrupted
+/// bench leaves either the previous file or the new one, never half of one. Pure functions
+/// of their arguments apart from the files; nothing here is shared between calls.
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "renderers/common/metrics.h"
+
+namespace brickyard {
+
+/// @brief One back end at one quality setting: how fast, and how far from the truth.
+struct BenchRow {
+  std::string backend;          ///< "reference", "raymarch", ...
+  std::string quality;          ///< human label of the knob setting, e.g. "step=0.5" ("" for none)
+  double quality_value = 0;     ///< the knob's value: orders a back end's rows in the plot
+  int width = 0, height = 0, threads = 0;
+  double cold_median_s = 0, cold_p95_s = 0, warm_median_s = 0, warm_p95_s = 0;
+  int cold_runs = 0, warm_runs = 0;
+  ImageError error;             ///< against the reference frame
+  bool is_reference = false;    ///< the truth itself: error 0 by definition
+  double rays_per_second_per_core = 0;
+  uint64_t samples = 0, bricks = 0, bytes_read = 0;  ///< per warm frame
+  std::string image;            ///< this row's colour PNG, relative to the report directory ("" for none)
+};
+
+struct BenchReport {
+  std::string title;            ///< e.g. scene file name, dataset, image size, mode
+  std::vector<BenchRow> rows;
+};
+
+/// @brief The files write_bench_report() wrote; an entry is empty when that file was not
+/// written (contact_sheet when no row's image exists).
+struct BenchReportPaths {
+  std::string csv;              ///< DIR/bench.csv
+  std::string markdown;         ///< DIR/bench.md
+  std::string error_plot;       ///< DIR/error-vs-time.png
+  std::string contact_sheet;    ///< DIR/contact-sheet.png
+};
+
+/// @brief Indices (ascending) of the rows on the Pareto front of (warm_median_s, error.rmse):
+/// no other row is at least as fast and at least as accurate and strictly better in one.
+/// Rows with identical time and error do not dominate each other, so both stay. Reference
+/// rows are neither candidates nor competitors (their error is zero by definition), and nor
+/// are rows whose time or RMSE is NaN (not measured).
+std::vector<size_t> pareto_front(const std::vector<BenchRow>& rows);
+
+/// @brief Writes, creating `dir` if needed:
+/// - DIR/bench.csv: a header line and one line per row with every field (doubles in
+///   shortest round-trip form, so full precision; infinity as "inf"), RFC 4180 quoting;
+/// - DIR/error-vs-time.png: colour RMSE against warm median time (ms), both axes logarithmic,
+///   one curve per back end in quality_value order with points labelled by quality, the
+///   Pareto front as a highlighted staircase, and each reference row as a labelled dashed
+///   vertical line at its time (zero error has no place on a log axis); a non-reference row
+///   with zero error sits on the bottom edge, labelled "(RMSE 0)";
+/// - DIR/contact-sheet.png: the rows' images in a grid, each titled "backend quality, time,
+///   RMSE" (rows whose image is empty or missing are left out; not written when none is left);
+/// - DIR/bench.md: title, a summary, the chart, a table (backend, quality, cold and warm
+///   median/p95 ms, rays/s/core, bytes read, RMSE, PSNR, SSIM, depth mean/p99 voxels, normal
+///   mean degrees, coverage mismatch %, Pareto mark, image link), a legend and the contact sheet.
+/// The charts need gnuplot (package gnuplot-nox).
+/// A chart not drawn this time is removed if an earlier run left one, so the directory never
+/// mixes two runs.
+/// @throws Error(io) naming the file that cannot be written. When a chart fails (gnuplot
+/// missing or failing), bench.csv and bench.md (without that chart) are still written, no
+/// partial chart is left, and then the chart's Error(unsupported) naming it is thrown.
+BenchReportPaths write_bench_report(const std::string& dir, const BenchReport& report);
+
+}  // namespace brickyard

@@ -1,0 +1,364 @@
+// The bench report (CSV, Markdown, charts) and the gnuplot runner it draws with.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "core/image.h"
+#include "core/plot.h"
+#include "renderers/common/bench_report.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+namespace fs = std::filesystem;
+
+BenchRow row(std::string backend, std::string quality, double quality_value, double warm_s, double rmse) {
+  BenchRow r;
+  r.backend = std::move(backend);
+  r.quality = std::move(quality);
+  r.quality_value = quality_value;
+  r.width = 64;
+  r.height = 48;
+  r.threads = 2;
+  r.cold_median_s = warm_s * 3;
+  r.cold_p95_s = warm_s * 3.5;
+  r.warm_median_s = warm_s;
+  r.warm_p95_s = warm_s * 1.2;
+  r.cold_runs = 3;
+  r.warm_runs = 5;
+  r.error.rmse = rmse;
+  r.error.psnr_db = rmse > 0 ? 20 * std::log10(1 / rmse) : std::numeric_limits<double>::infinity();
+  r.error.ssim = 1 - rmse;
+  r.rays_per_second_per_core = 1.5e6;
+  r.samples = 123456;
+  r.bricks = 789;
+  r.bytes_read = 1 << 20;
+  return r;
+}
+
+BenchRow reference_row(double warm_s) {
+  BenchRow r = row("reference", "", 0, warm_s, 0);
+  r.is_reference = true;
+  return r;
+}
+
+/// RFC 4180 records of `text` (quoted fields may hold commas, quotes and line breaks).
+std::vector<std::vector<std::string>> parse_csv(const std::string& text) {
+  std::vector<std::vector<std::string>> records(1, std::vector<std::string>(1));
+  bool quoted = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    auto& field = records.back().back();
+    if (quoted) {
+      if (c == '"' && i + 1 < text.size() && text[i + 1] == '"') field += '"', ++i;
+      else if (c == '"') quoted = false;
+      else field += c;
+    } else if (c == '"') {
+      quoted = true;
+    } else if (c == ',') {
+      records.back().emplace_back();
+    } else if (c == '\n') {
+      records.emplace_back(1);
+    } else if (c != '\r') {
+      field += c;
+    }
+  }
+  if (records.back().size() == 1 && records.back()[0].empty()) records.pop_back();
+  return records;
+}
+
+std::vector<std::string> lines_starting_with(const std::string& text, const std::string& prefix) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  while (start < text.size()) {
+    size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    const std::string line = text.substr(start, end - start);
+    if (line.rfind(prefix, 0) == 0) out.push_back(line);
+    start = end + 1;
+  }
+  return out;
+}
+
+bool has_partial_files(const fs::path& dir) {
+  for (const auto& entry : fs::recursive_directory_iterator(dir))
+    if (entry.path().string().find(".partial") != std::string::npos) return true;
+  return false;
+}
+
+/// A report of two back ends over a quality sweep, with small images on disk.
+BenchReport sample_report(const testing::TempDir& dir) {
+  BenchReport report;
+  report.title = "sample scene, fbm 96^3, 64x48, iso";
+  report.rows = {reference_row(0.200),
+                 row("raymarch", "step=1, lod=1", 1, 0.010, 0.05),  // comma: must be quoted in the CSV
+                 row("raymarch", "step=0.5, lod=1", 0.5, 0.020, 0.02),
+                 row("raymarch", "step=0.25, lod=1", 0.25, 0.040, 0.015),
+                 row("dda", "\"exact\" cells", 1, 0.030, 0.03),  // dominated by step=0.5
+                 row("dda", "it's | odd", 2, 0.060, 0.0)};       // zero error, not the reference
+  for (size_t i = 0; i < report.rows.size(); ++i) {
+    ImageRGBA8 image(64, 48, Rgba8{uint8_t(40 * i), 90, uint8_t(255 - 40 * i), 255});
+    for (int y = 10; y < 30; ++y)
+      for (int x = 20; x < 44; ++x) image(x, y) = Rgba8{250, 250, 250, 255};
+    report.rows[i].image = "images/row " + std::to_string(i) + " (it's).png";  // spaces, parentheses, a quote
+    fs::create_directories(dir.path() / "images");
+    write_png(dir.file(report.rows[i].image), image);
+  }
+  return report;
+}
+
+TEST(ParetoFront, ExcludesDominatedRowsAndTheReference) {
+  const std::vector<BenchRow> rows = {reference_row(1.0),        // 0: fastest of all, but the truth
+                                      row("a", "", 0, 0.010, 0.10),   // 1: fastest candidate
+                                      row("a", "", 0, 0.020, 0.05),   // 2
+                                      row("b", "", 0, 0.030, 0.07),   // 3: dominated by 2
+                                      row("b", "", 0, 0.040, 0.01),   // 4: most accurate
+                                      row("c", "", 0, 0.050, 0.01)};  // 5: as accurate as 4, slower
+  EXPECT_EQ(pareto_front(rows), (std::vector<size_t>{1, 2, 4}));
+}
+
+TEST(ParetoFront, KeepsExactTiesAndDropsRowsEqualInOneAndWorseInTheOther) {
+  const std::vector<BenchRow> rows = {row("a", "", 0, 0.010, 0.05), row("b", "", 0, 0.010, 0.05),  // identical: both
+                                      row("c", "", 0, 0.010, 0.06),                                 // same time, worse
+                                      row("d", "", 0, 0.005, 0.20), row("e", "", 0, 0.007, 0.20)};  // same error, slower
+  EXPECT_EQ(pareto_front(rows), (std::vector<size_t>{0, 1, 3}));
+}
+
+TEST(ParetoFront, IgnoresUnmeasuredRowsAndMayBeEmpty) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<BenchRow> rows = {row("a", "", 0, nan, 0.0), row("b", "", 0, 0.02, nan), row("c", "", 0, 0.03, 0.1)};
+  EXPECT_EQ(pareto_front(rows), (std::vector<size_t>{2}));
+  EXPECT_TRUE(pareto_front({reference_row(1.0)}).empty());
+  EXPECT_TRUE(pareto_front({}).empty());
+}
+
+TEST(GnuplotQuote, DoublesSingleQuotesAndRejectsLineBreaks) {
+  EXPECT_EQ(gnuplot_quote("plain"), "'plain'");
+  EXPECT_EQ(gnuplot_quote("it's \"x\" \\n"), "'it''s \"x\" \\n'");
+  EXPECT_THROW(gnuplot_quote("two\nlines"), Error);
+}
+
+TEST(BenchReport, CsvHasEveryColumnOnEveryLineAndQuotesLabels) {
+  testing::TempDir dir;
+  const BenchReport report = sample_report(dir);
+  BenchReportPaths paths;
+  try {
+    paths = write_bench_report(dir.file("out"), report);
+  } catch (const Error& e) {
+    ASSERT_EQ(e.code(), Errc::unsupported) << e.what();  // only the charts may fail (no gnuplot)
+  }
+  const auto records = parse_csv(testing::read_file(dir.file("out/bench.csv")));
+  ASSERT_EQ(records.size(), report.rows.size() + 1);
+  const size_t columns = records[0].size();
+  EXPECT_EQ(columns, 32u);
+  for (const auto& r : records) EXPECT_EQ(r.size(), columns);
+  auto column = [&](const std::string& name) {
+    return size_t(std::find(records[0].begin(), records[0].end(), name) - records[0].begin());
+  };
+  EXPECT_EQ(records[2][column("quality")], "step=1, lod=1");
+  EXPECT_EQ(records[5][column("quality")], "\"exact\" cells");
+  EXPECT_EQ(records[6][column("image")], "images/row 5 (it's).png");
+  EXPECT_EQ(records[1][column("is_reference")], "1");
+  EXPECT_EQ(records[1][column("pareto")], "0");
+  EXPECT_EQ(records[2][column("pareto")], "1");
+  EXPECT_EQ(records[5][column("pareto")], "0");
+  EXPECT_EQ(records[6][column("psnr_db")], "inf");
+  // Full precision: the numbers read back exactly.
+  for (size_t i = 0; i < report.rows.size(); ++i) {
+    EXPECT_EQ(std::stod(records[i + 1][column("warm_median_s")]), report.rows[i].warm_median_s);
+    EXPECT_EQ(std::stod(records[i + 1][column("rmse")]), report.rows[i].error.rmse);
+    EXPECT_EQ(std::stod(records[i + 1][column("cold_p95_s")]), report.rows[i].cold_p95_s);
+  }
+}
+
+TEST(BenchReport, MarkdownHasOneTableLinePerRow) {
+  testing::TempDir dir;
+  const BenchReport report = sample_report(dir);
+  try {
+    write_bench_report(dir.path().string(), report);
+  } catch (const Error& e) {
+    ASSERT_EQ(e.code(), Errc::unsupported) << e.what();
+  }
+  const std::string md = testing::read_file(dir.file("bench.md"));
+  const auto table = lines_starting_with(md, "|");
+  ASSERT_EQ(table.size(), report.rows.size() + 2) << md;  // header, alignment, rows
+  EXPECT_NE(md.find("sample scene"), std::string::npos);
+  EXPECT_NE(md.find("Legend"), std::string::npos);
+  EXPECT_NE(table[2].find("truth"), std::string::npos) << table[2];
+  EXPECT_NE(table[3].find("★"), std::string::npos) << table[3];   // raymarch step=1: on the front
+  EXPECT_EQ(table[6].find("★"), std::string::npos) << table[6];   // dda "exact": dominated
+  EXPECT_NE(table[7].find("it's \\| odd"), std::string::npos) << table[7];  // the pipe is escaped
+  EXPECT_NE(table[3].find("[png](images/row%201%20%28it%27s%29.png)"), std::string::npos) << table[3];
+  // Every row has as many cells as the header.
+  auto cells = [](const std::string& line) {
+    size_t n = 0;
+    for (size_t i = 0; i < line.size(); ++i) n += line[i] == '|' && (i == 0 || line[i - 1] != '\\');
+    return n;
+  };
+  for (const auto& line : table) EXPECT_EQ(cells(line), cells(table[0])) << line;
+}
+
+TEST(BenchReport, ChartsAreReadablePngs) {
+  if (!gnuplot_available()) GTEST_SKIP() << "gnuplot is not installed (apt-get install gnuplot-nox)";
+  testing::TempDir dir;
+  const BenchReport report = sample_report(dir);
+  const BenchReportPaths paths = write_bench_report(dir.path().string(), report);
+  EXPECT_EQ(paths.csv, dir.file("bench.csv"));
+  EXPECT_EQ(paths.markdown, dir.file("bench.md"));
+  ASSERT_EQ(paths.error_plot, dir.file("error-vs-time.png"));
+  ASSERT_EQ(paths.contact_sheet, dir.file("contact-sheet.png"));
+  const ImageRGBA8 plot = read_png(paths.error_plot);
+  EXPECT_EQ(plot.width(), 1000);
+  EXPECT_EQ(plot.height(), 650);
+  const ImageRGBA8 sheet = read_png(paths.contact_sheet);
+  EXPECT_EQ(sheet.width(), 3 * 360);  // six images: three columns of 360 pixels
+  EXPECT_GT(sheet.height(), 2 * 200);
+  // The sheet shows the images: their white squares are there, not just an empty canvas.
+  size_t white = 0;
+  for (int y = 0; y < sheet.height(); ++y)
+    for (int x = 0; x < sheet.width(); ++x) white += sheet(x, y) == Rgba8{250, 250, 250, 255};
+  EXPECT_GT(white, 6u * 100u);
+  const std::string md = testing::read_file(paths.markdown);
+  EXPECT_NE(md.find("](error-vs-time.png)"), std::string::npos);
+  EXPECT_NE(md.find("](contact-sheet.png)"), std::string::npos);
+  EXPECT_FALSE(has_partial_files(dir.path()));
+}
+
+TEST(BenchReport, WithoutImagesThereIsNoContactSheet) {
+  if (!gnuplot_available()) GTEST_SKIP() << "gnuplot is not installed (apt-get install gnuplot-nox)";
+  testing::TempDir dir;
+  BenchReport report;
+  report.rows = {reference_row(0.1), row("a", "", 1, 0.01, 0.1)};
+  report.rows[1].image = "never-written.png";
+  const BenchReportPaths paths = write_bench_report(dir.path().string(), report);
+  EXPECT_TRUE(paths.contact_sheet.empty());
+  EXPECT_FALSE(fs::exists(dir.file("contact-sheet.png")));
+  EXPECT_NO_THROW(read_png(paths.error_plot));
+  EXPECT_NE(testing::read_file(paths.markdown).find("| missing |"), std::string::npos);
+  // Nothing plottable at all (only the reference) still gives a chart.
+  report.rows = {reference_row(0.1)};
+  EXPECT_NO_THROW(read_png(write_bench_report(dir.path().string(), report).error_plot));
+}
+
+TEST(BenchReport, AFailedChartRemovesTheOneAnEarlierRunLeft) {
+  testing::TempDir dir;
+  const BenchReport report = sample_report(dir);
+  try {
+    write_bench_report(dir.path().string(), report);
+  } catch (const Error&) {
+  }
+  std::ofstream(dir.file("error-vs-time.png")) << "an earlier run's chart";
+  fs::create_directories(dir.path() / "error-vs-time.png.partial" / "blocker");
+  EXPECT_THROW(write_bench_report(dir.path().string(), report), Error);
+  EXPECT_FALSE(fs::exists(dir.file("error-vs-time.png")));
+}
+
+TEST(BenchReport, FailingChartNamesItsFileAndLeavesNoPartialFile) {
+  testing::TempDir dir;
+  const BenchReport report = sample_report(dir);
+  // A directory where gnuplot's output should go: it cannot open it, even as root.
+  fs::create_directories(dir.path() / "error-vs-time.png.partial" / "blocker");
+  try {
+    write_bench_report(dir.path().string(), report);
+    FAIL() << "expected an Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::unsupported);
+    EXPECT_EQ(e.file(), dir.file("error-vs-time.png"));
+    EXPECT_NE(std::string(e.what()).find("gnuplot"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir.file("error-vs-time.png")));
+  // The data is still there, and the page does not link the missing chart.
+  EXPECT_EQ(parse_csv(testing::read_file(dir.file("bench.csv"))).size(), report.rows.size() + 1);
+  EXPECT_EQ(testing::read_file(dir.file("bench.md")).find("error-vs-time.png"), std::string::npos);
+  // The blocker is ours, not a partial file of the report; remove it and check the rest.
+  fs::remove_all(dir.path() / "error-vs-time.png.partial");
+  EXPECT_FALSE(has_partial_files(dir.path()));
+}
+
+TEST(BenchReport, UnwritableDirectoryGivesAnErrorNamingIt) {
+  testing::TempDir dir;
+  std::ofstream(dir.file("a-file")) << "not a directory";
+  try {
+    write_bench_report(dir.file("a-file/report"), BenchReport{});
+    FAIL() << "expected an Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::io);
+    EXPECT_EQ(e.file(), dir.file("a-file/report"));
+  }
+  EXPECT_FALSE(has_partial_files(dir.path()));
+}
+
+TEST(RunGnuplot, FailureNamesThePngAndLeavesNoTemporaryFile) {
+  testing::TempDir dir;
+  // Keep the temporary script where this test can see it.
+  const char* old_tmpdir = std::getenv("TMPDIR");
+  const std::string saved = old_tmpdir ? old_tmpdir : "";
+  fs::create_directories(dir.path() / "tmp");
+  ::setenv("TMPDIR", dir.file("tmp").c_str(), 1);
+
+  const std::string missing_dir_png = dir.file("no such dir/x.png");
+  try {
+    run_gnuplot("plot x\n", missing_dir_png);
+    ADD_FAILURE() << "expected an Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::unsupported);
+    EXPECT_EQ(e.file(), missing_dir_png);
+    EXPECT_NE(std::string(e.what()).find("gnuplot failed or is missing (apt-get install gnuplot-nox)"), std::string::npos);
+  }
+  const std::string bad_script_png = dir.file("bad.png");
+  try {
+    run_gnuplot("plot sin(\n", bad_script_png);
+    ADD_FAILURE() << "expected an Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.file(), bad_script_png);
+  }
+  EXPECT_FALSE(fs::exists(bad_script_png));
+  EXPECT_FALSE(has_partial_files(dir.path()));
+  EXPECT_TRUE(fs::is_empty(dir.path() / "tmp"));
+
+  if (old_tmpdir) ::setenv("TMPDIR", saved.c_str(), 1);
+  else ::unsetenv("TMPDIR");
+}
+
+TEST(RunGnuplot, MissingGnuplotSaysHowToInstallIt) {
+  testing::TempDir dir;
+  const char* old_path = std::getenv("PATH");
+  const std::string saved = old_path ? old_path : "";
+  ::setenv("PATH", dir.path().c_str(), 1);  // an empty directory: no gnuplot on PATH
+  EXPECT_FALSE(gnuplot_available());
+  try {
+    run_gnuplot("plot x\n", dir.file("x.png"));
+    ADD_FAILURE() << "expected an Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::unsupported);
+    EXPECT_EQ(e.file(), dir.file("x.png"));
+    EXPECT_NE(std::string(e.what()).find("apt-get install gnuplot-nox"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(fs::is_empty(dir.path()));
+  ::setenv("PATH", saved.c_str(), 1);
+}
+
+TEST(RunGnuplot, WritesToPathsWithSpacesAndQuotes) {
+  if (!gnuplot_available()) GTEST_SKIP() << "gnuplot is not installed (apt-get install gnuplot-nox)";
+  testing::TempDir dir;
+  fs::create_directories(dir.path() / "it's a \"dir\" $(x)");
+  const std::string png = dir.file("it's a \"dir\" $(x)/plot; rm -rf x.png");
+  run_gnuplot("plot sin(x) title " + gnuplot_quote("it's sin") + "\n", png, 320, 200);
+  const ImageRGBA8 image = read_png(png);
+  EXPECT_EQ(image.width(), 320);
+  EXPECT_EQ(image.height(), 200);
+  EXPECT_FALSE(has_partial_files(dir.path()));
+}
+
+}  // namespace
+}  // namespace brickyard
