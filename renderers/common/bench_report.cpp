@@ -87,6 +87,19 @@ std::string md_link_target(std::string_view path) {
 /// A number for a gnuplot script or datablock.
 std::string gp_number(double v) { return fmt::format("{:.17g}", v); }
 
+/// Over less than three decades gnuplot labels a log axis too sparsely (one or two powers of
+/// ten): label it at 1, 2, 5 times each power instead.
+std::string log_tics(const char* axis, double lo, double hi) {
+  if (!(lo > 0) || hi / lo >= 1e3) return {};
+  std::string list;
+  for (int e = int(std::floor(std::log10(lo))); e <= int(std::ceil(std::log10(hi))); ++e)
+    for (double m : {1.0, 2.0, 5.0}) {
+      const double v = m * std::pow(10.0, e);
+      if (v >= lo && v <= hi) list += fmt::format("{}{:g}", list.empty() ? "" : ", ", v);
+    }
+  return fmt::format("set {}tics ({})\nset m{}tics 10\n", axis, list, axis);
+}
+
 bool plottable_time(const BenchRow& r) { return std::isfinite(r.warm_median_s) && r.warm_median_s > 0; }
 
 void write_text(const std::string& path, const std::string& text) {
@@ -138,12 +151,13 @@ std::string error_plot_script(const BenchReport& report, const std::vector<size_
   }
   if (t_max == 0) t_min = 1, t_max = 100;
   if (e_max == 0) e_min = 1e-3, e_max = 1e-1;
-  const double floor = e_min / 4;
-  const double x_lo = t_min / 1.6, x_hi = t_max * 1.6, y_lo = floor / 1.6, y_hi = e_max * 2.5;
-  auto plotted_error = [&](const BenchRow& r) { return r.error.rmse > 0 ? r.error.rmse : floor; };
   auto on_plot = [&](const BenchRow& r) {
     return !r.is_reference && plottable_time(r) && std::isfinite(r.error.rmse) && r.error.rmse >= 0;
   };
+  const bool any_exact = std::any_of(rows.begin(), rows.end(), [&](const BenchRow& r) { return on_plot(r) && r.error.rmse == 0; });
+  const double floor = e_min / 4;
+  const double x_lo = t_min / 1.6, x_hi = t_max * 1.6, y_lo = any_exact ? floor / 1.6 : e_min / 2, y_hi = e_max * 2.5;
+  auto plotted_error = [&](const BenchRow& r) { return r.error.rmse > 0 ? r.error.rmse : floor; };
 
   std::string s = "set termoption noenhanced\n";
   s += fmt::format("set title {}\n", gnuplot_quote(one_line(report.title.empty() ? "bench" : report.title)));
@@ -152,6 +166,7 @@ std::string error_plot_script(const BenchReport& report, const std::vector<size_
        "set grid xtics ytics mxtics mytics lc rgb '#dddddd'\nset key outside right top\n";
   s += fmt::format("set xrange [{}:{}]\nset yrange [{}:{}]\n", gp_number(x_lo), gp_number(x_hi), gp_number(y_lo),
                    gp_number(y_hi));
+  s += log_tics("x", x_lo, x_hi) + log_tics("y", y_lo, y_hi);
 
   // Step 2: one datablock per back end, in quality order, and the front as a staircase that
   // runs on to the right edge (beyond its slowest point nothing is more accurate).
