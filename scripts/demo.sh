@@ -2,7 +2,8 @@
 # The main job on the built-in default dataset, as far as the pipeline goes today:
 # generate the default procedural volume (Marschner-Lobb, 256^3 f32), import it into a
 # multiresolution brick store, verify and describe it, fly the benchmark camera path through
-# its cache recording every access, and replay that trace against every policy.
+# its cache recording every access, replay that trace against every policy, render the
+# dataset, and end with the renderers' error-against-run-time report against the reference.
 # Outputs go to out/demo/ (override with BRICKYARD_OUT=dir).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,6 +20,8 @@ mkdir -p "$out"
 "$by" flight "$out/default.store" --path scenes/flight-orbit.json --l1 16MiB --l2 32MiB \
     --trace "$out/flight.bytrace" --stats "$out/cache-stats.json"
 "$by" cachebench "$out/flight.bytrace" --plot "$out/miss-ratio.png"
+"$by" render scenes/default-dvr.json --dataset "$out/default.store" -o "$out/dvr.png" --stats "$out/dvr-stats.json"
+"$by" bench scenes/default-iso.json --dataset "$out/default.store" --out "$out/bench"
 
 echo
 echo "outputs in $out/:"
@@ -28,3 +31,7 @@ echo "  default.store/      its brick store (LMDB): brickyard info|verify|export
 echo "  flight.bytrace      every cache access of a 120-frame camera flight (scenes/flight-orbit.json)"
 echo "  cache-stats.json    the cache's statistics after the flight"
 echo "  miss-ratio.png      miss ratio against cache size for every policy and OPT (data: miss-ratio.png.csv)"
+echo "  dvr.png             a direct volume rendering of it (scenes/default-dvr.json), statistics in dvr-stats.json"
+echo "  bench/              every back end against the reference renderer (scenes/default-iso.json):"
+echo
+echo "report: $out/bench/bench.md  (error-vs-time.png, contact-sheet.png, bench.csv, images/)"
