@@ -499,7 +499,14 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
       break;
     case StoreState::complete: {
       const Manifest old = read_manifest(dir);
-      if (old.source == nlohmann::json::parse(source_json).dump() && old.build == build_json && !options.force) {
+      // The generator (what made a raw file, from its sidecar) describes the data but is not
+      // its identity: stores built before it was recorded stay up to date.
+      auto identity = [](const std::string& json) {
+        nlohmann::json j = nlohmann::json::parse(json);
+        if (j.is_object()) j.erase("generator");
+        return j.dump();
+      };
+      if (identity(old.source) == identity(source_json) && old.build == build_json && !options.force) {
         result.manifest = old;
         result.up_to_date = true;
         return result;

@@ -86,6 +86,7 @@ RenderSession::RenderSession(const Scene& scene, const Options& options)
         .with_file(scene_.file)
         .with_field("mode");
   store_ = std::make_unique<BrickStore>(scene_.dataset);
+  normalize_values(scene_, store_->manifest().min_value, store_->manifest().max_value);
   build();
 }
 

@@ -193,6 +193,7 @@ Scene read_scene(const nlohmann::json& j, const std::string& file) {
   s.camera.width = s.width;
   s.camera.height = s.height;
 
+  s.normalized_values = top.choice("values", "stored", {"stored", "normalized"}) == "normalized";
   const std::string mode = top.choice("mode", "iso", {"iso", "dvr", "mip"});
   s.mode = mode == "iso" ? RenderMode::iso : mode == "dvr" ? RenderMode::dvr : RenderMode::mip;
   if (const nlohmann::json* iso = top.get("isosurfaces")) {
@@ -244,6 +245,18 @@ Scene read_scene(const nlohmann::json& j, const std::string& file) {
 }
 
 }  // namespace
+
+void normalize_values(Scene& scene, double lo, double hi) {
+  if (!scene.normalized_values) return;
+  auto map = [&](double v) { return lo + v * (hi - lo); };
+  for (Isosurface& surface : scene.isosurfaces) surface.value = map(surface.value);
+  if (!scene.transfer_function.empty()) {
+    std::vector<TfPoint> points = scene.transfer_function.points();
+    for (TfPoint& p : points) p.value = map(p.value);
+    scene.transfer_function = TransferFunction(std::move(points));
+  }
+  scene.normalized_values = false;
+}
 
 Scene parse_scene(const std::string& json_text, const std::string& file) {
   nlohmann::json j;

@@ -9,7 +9,8 @@
 /// Positions (camera, lights, clip box) are in coordinates normalised to the volume's
 /// bounding box, [0, 1]^3, like camera paths, so one scene fits any dataset. Values
 /// (isovalues, transfer-function points) are in the store's units, those `brickyard info`
-/// prints.
+/// prints, or, with "values": "normalized", fractions of the store's value range [min, max]
+/// (mapped when the store is opened: normalize_values()).
 
 #include <cstdint>
 #include <map>
@@ -80,12 +81,17 @@ struct Scene {
   Vec3f background{0.0f};
   Quality quality;
   CacheBudget cache;
+  bool normalized_values = false;       ///< values are fractions of the store's range until mapped
 
   int frames() const { return has_path ? camera.frames : 1; }
   /// @brief Whether any value in [lo, hi] can contribute to the image (isovalue inside,
   /// non-zero opacity by the transfer function's summed-area table; MIP: everything).
   bool value_range_visible(double lo, double hi) const;
 };
+
+/// @brief Maps normalised values (isovalues, transfer-function points) onto [lo, hi], the
+/// store's value range; does nothing for scenes in stored units.
+void normalize_values(Scene& scene, double lo, double hi);
 
 /// @brief Reads and validates a scene file. Errors name the file and the key.
 Scene load_scene(const std::string& path);

@@ -80,4 +80,24 @@ bool TransferFunction::visible(double lo, double hi) const {
   return prefix_[i1 + 1] - prefix_[i0] > 0;
 }
 
+TfTable::TfTable(const TransferFunction& tf, double step_voxels, int size) {
+  if (tf.empty()) {
+    entries_.assign(1, Entry{0, 0, 0, 0});
+    return;
+  }
+  const double lo = tf.points().front().value, hi = tf.points().back().value;
+  const int n = hi > lo ? std::max(size, 2) : 1;
+  entries_.resize(size_t(n));
+  for (int i = 0; i < n; ++i) {
+    const double v = n > 1 ? lo + (hi - lo) * double(i) / double(n - 1) : lo;
+    Vec3f c;
+    float a;
+    tf.eval(v, c, a);
+    entries_[size_t(i)] = {c.x, c.y, c.z, float(1 - std::pow(1 - double(a), step_voxels))};
+  }
+  lo_ = float(lo);
+  scale_ = n > 1 ? float(double(n - 1) / (hi - lo)) : 0.0f;
+  last_ = float(n - 1);
+}
+
 }  // namespace brickyard
