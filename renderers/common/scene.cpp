@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include "cache/policy.h"
 #include "core/json_reader.h"
 #include "core/units.h"
 
@@ -81,6 +82,18 @@ uint64_t bytes(JsonObjectReader& r, std::string_view key, uint64_t fallback) {
   } catch (Error& e) {
     throw e.with_file(r.file());
   }
+}
+
+/// A replacement policy a live cache can run (not `opt`, which needs the future: replay only).
+std::string policy(JsonObjectReader& r, std::string_view key, const std::string& fallback) {
+  const std::string name = r.string(key, fallback);
+  std::string known;
+  for (const std::string& p : policy_names()) {
+    if (p == "opt") continue;
+    if (p == name) return name;
+    known += fmt::format("{}'{}'", known.empty() ? "" : ", ", p);
+  }
+  throw r.error(key, fmt::format("'{}' is not a policy a live cache can run (known: {})", name, known));
 }
 
 void read_backend(JsonObjectReader& top, Scene& s) {
@@ -235,8 +248,8 @@ Scene read_scene(const nlohmann::json& j, const std::string& file) {
     JsonObjectReader r = top.object("cache");
     s.cache.l1_bytes = bytes(r, "l1", s.cache.l1_bytes);
     s.cache.l2_bytes = bytes(r, "l2", s.cache.l2_bytes);
-    s.cache.l1_policy = r.string("l1_policy", s.cache.l1_policy);
-    s.cache.l2_policy = r.string("l2_policy", s.cache.l2_policy);
+    s.cache.l1_policy = policy(r, "l1_policy", s.cache.l1_policy);
+    s.cache.l2_policy = policy(r, "l2_policy", s.cache.l2_policy);
     s.cache.loader_threads = int(r.integer("loader_threads", s.cache.loader_threads, 1, 64));
     r.finish();
   }
