@@ -243,6 +243,17 @@ void run_bench(const BenchOptions& o) {
     }
     for (const auto& n : names) builtin_backends().find(n);  // unknown names fail before any rendering
   }
+  // A swept parameter that none of these back ends declares is a misspelling, not a no-op.
+  for (const auto& [param, vals] : sweeps) {
+    const bool declared = std::any_of(names.begin(), names.end(), [&](const std::string& n) {
+      const std::vector<BackendParam>& params = builtin_backends().find(n).info.params;
+      return std::any_of(params.begin(), params.end(), [&](const BackendParam& p) { return p.name == param; });
+    });
+    if (!declared)
+      throw Error(Errc::invalid_argument, fmt::format("no back end benchmarked here has a parameter '{}' "
+                                                      "(brickyard render --list-backends lists them)", param))
+          .with_field("--quality");
+  }
 
   fs::create_directories(fs::path(o.out) / "images");
   FrameOutputs outputs;

@@ -128,7 +128,9 @@ void read_camera_or_path(JsonObjectReader& top, Scene& s, const std::filesystem:
     try {
       s.camera = CameraPath::load(file.string());
     } catch (Error& e) {
-      throw e.with_field("camera_path");
+      // Errors inside the path file name its own key ("camera_path.keyframes"); keep that.
+      if (e.field().empty()) e.with_field("camera_path");
+      throw;
     }
     return;
   }
@@ -228,7 +230,7 @@ Scene read_scene(const nlohmann::json& j, const std::string& file) {
   s.sampling_rate = top.number("sampling_rate", 1.0, 1e-3, 1e3);
   read_shading(top, s);
   if (s.shading.shadows && s.mode != RenderMode::iso)
-    throw top.error("shading", "shadows are cast in iso mode only");
+    throw top.error("shading.shadows", "shadows are cast in iso mode only");
   if (top.has("clip")) {
     JsonObjectReader r = top.object("clip");
     Box3d clip{r.vec3("lo"), r.vec3("hi")};

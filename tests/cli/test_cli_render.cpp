@@ -1,0 +1,226 @@
+// End-to-end tests of `brickyard render` and `brickyard bench`, as a user runs them, on a small
+// store imported by the test.
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/image.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+const std::string kExe = BRICKYARD_EXE;
+testing::CommandResult brickyard(const std::string& args) { return testing::run_command(kExe + " " + args); }
+
+const std::string kCamera = R"("camera": {"eye": [1.8, -1.2, 1.4], "target": [0.5, 0.5, 0.5], "fov_degrees": 40})";
+const std::string kIso = R"("mode": "iso", "isosurfaces": [{"value": 0.0, "color": [0.9, 0.6, 0.3]}])";
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) out.push_back(line);
+  return out;
+}
+
+/// A sphere's signed distance, 32^3 f32 in 16^3 bricks, imported once for the whole suite;
+/// scenes are written next to it and name it relatively.
+class CliRender : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    const auto r = brickyard("-q import field:sphere --size 32 --type f32 --brick-size 16 --out " + dir_->file("sphere.store"));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  static void TearDownTestSuite() { delete dir_; }
+
+  /// Writes a scene file into the suite's directory; returns its path.
+  static std::string write_scene(const std::string& name, const std::string& members) {
+    const std::string path = dir_->file(name);
+    std::ofstream(path) << "// written by the test\n{\"dataset\": \"sphere.store\", " << members << "}\n";
+    return path;
+  }
+
+  static testing::TempDir* dir_;
+};
+testing::TempDir* CliRender::dir_ = nullptr;
+
+TEST_F(CliRender, WritesColourDepthNormalsAndStats) {
+  testing::TempDir out;
+  const std::string scene = write_scene("still.json", R"("image": {"width": 48, "height": 32}, )" + kCamera + ", " + kIso);
+  const auto r = brickyard("render " + scene + " -o " + out.file("c.png") + " --depth " + out.file("d.png") + " --normals " +
+                           out.file("n.png") + " --stats " + out.file("stats.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("frame 0: raymarch 48x32"));
+
+  const ImageRGBA8 colour = read_png(out.file("c.png"));
+  EXPECT_EQ(colour.width(), 48);
+  EXPECT_EQ(colour.height(), 32);
+  int lit = 0;  // the sphere covers part of the image: some pixels are not the black background
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 48; ++x) lit += colour(x, y).r > 0;
+  EXPECT_GT(lit, 100);
+  EXPECT_LT(lit, 48 * 32);
+  for (const char* name : {"d.png", "n.png"}) {
+    const ImageRGBA8 img = read_png(out.file(name));
+    EXPECT_EQ(img.width(), 48) << name;
+    EXPECT_EQ(img.height(), 32) << name;
+  }
+
+  const nlohmann::json stats = nlohmann::json::parse(testing::read_file(out.file("stats.json")));
+  for (const char* key : {"scene", "backend", "params", "frames", "cache"}) EXPECT_TRUE(stats.contains(key)) << key;
+  EXPECT_EQ(stats["scene"], scene);
+  EXPECT_EQ(stats["backend"], "raymarch");
+  EXPECT_EQ(stats["params"]["step"], 0.5);
+  ASSERT_EQ(stats["frames"].size(), 1u);
+  const nlohmann::json& f = stats["frames"][0];
+  for (const char* key : {"frame", "width", "height", "threads", "seconds", "phases", "rays", "samples", "cells", "nodes",
+                          "bricks", "gradients", "shadow_rays", "rays_per_second", "cache"})
+    EXPECT_TRUE(f.contains(key)) << key;
+  EXPECT_EQ(f["frame"], 0);
+  EXPECT_EQ(f["width"], 48);
+  EXPECT_EQ(f["rays"], 48 * 32);
+  EXPECT_GT(f["gradients"].get<int64_t>(), 0);  // headlight shading by default
+  for (const char* key : {"l1", "l2", "l3", "stalls"}) EXPECT_TRUE(stats["cache"].contains(key)) << key;
+}
+
+TEST_F(CliRender, CameraPathFramesAreNumbered) {
+  testing::TempDir out;
+  const std::string scene = write_scene("path.json", R"("image": {"width": 24, "height": 16}, "camera_path": {"frames": 3,
+      "keyframes": [{"eye": [1.8, -1.2, 1.4], "target": [0.5, 0.5, 0.5]}, {"eye": [-0.8, 1.8, 1.2], "target": [0.5, 0.5, 0.5]}]}, )" +
+                                                        kIso);
+  auto r = brickyard("-q render " + scene + " --frames all -o " + out.file("f.png") + " --depth " + out.file("d.png") + " --stats " +
+                     out.file("s.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* name : {"f_0000.png", "f_0001.png", "f_0002.png", "d_0000.png", "d_0002.png"}) {
+    ASSERT_TRUE(fs::exists(out.file(name))) << name;
+    EXPECT_EQ(read_png(out.file(name)).width(), 24) << name;
+  }
+  EXPECT_FALSE(fs::exists(out.file("f.png")));
+  EXPECT_FALSE(fs::exists(out.file("f_0003.png")));
+  EXPECT_EQ(nlohmann::json::parse(testing::read_file(out.file("s.json")))["frames"].size(), 3u);
+
+  r = brickyard("-q render " + scene + " --frames 1-2 -o " + out.file("g.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(out.file("g_0000.png")));
+  EXPECT_TRUE(fs::exists(out.file("g_0001.png")));
+  EXPECT_TRUE(fs::exists(out.file("g_0002.png")));
+
+  r = brickyard("-q render " + scene + " --frames 3 -o " + out.file("h.png"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("--frames"));
+  EXPECT_THAT(r.output, HasSubstr("0-2"));
+}
+
+TEST_F(CliRender, MalformedScenesExitNonZeroNamingTheFileAndKeyAndWriteNothing) {
+  testing::TempDir out;
+  struct Bad {
+    const char* file;
+    std::string members;
+    std::vector<std::string> mentions;
+  };
+  const Bad bad[] = {
+      {"typo.json", kCamera + ", " + kIso + R"(, "shading": {"ligth": "point"})", {"typo.json", "'shading.ligth'", "unknown key"}},
+      {"range.json", kCamera + ", " + kIso + R"(, "image": {"width": 0})", {"range.json", "'image.width'"}},
+      {"syntax.json", kCamera + ", " + kIso + ", \"mode\": ", {"syntax.json", "not valid JSON"}},
+      {"noiso.json", kCamera + R"(, "mode": "iso")", {"noiso.json", "'isosurfaces'"}},
+  };
+  for (const Bad& b : bad) {
+    const std::string scene = write_scene(b.file, b.members);
+    const auto r = brickyard("render " + scene + " -o " + out.file("x.png"));
+    EXPECT_EQ(r.exit_code, 1) << r.output;  // Errc::format
+    EXPECT_THAT(r.output, HasSubstr("brickyard: error:"));
+    for (const std::string& m : b.mentions) EXPECT_THAT(r.output, HasSubstr(m)) << b.file;
+    EXPECT_FALSE(fs::exists(out.file("x.png"))) << b.file;
+  }
+  auto r = brickyard("render " + dir_->file("absent.json") + " -o " + out.file("x.png"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("absent.json"));
+
+  // A scene whose store does not exist names the store.
+  std::ofstream(dir_->file("nostore.json")) << R"({"dataset": "no-such.store", )" << kCamera << ", " << kIso << "}";
+  r = brickyard("render " + dir_->file("nostore.json") + " -o " + out.file("x.png"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("no-such.store"));
+  EXPECT_FALSE(fs::exists(out.file("x.png")));
+}
+
+TEST_F(CliRender, UnknownBackEndOrParameterIsAUsageErrorListingTheKnownOnes) {
+  testing::TempDir out;
+  const std::string scene = write_scene("small.json", R"("image": {"width": 16, "height": 16}, )" + kCamera + ", " + kIso);
+  auto r = brickyard("render " + scene + " --backend raytrace -o " + out.file("x.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("'raytrace'"));
+  EXPECT_THAT(r.output, HasSubstr("'reference'"));
+  EXPECT_THAT(r.output, HasSubstr("'raymarch'"));
+  EXPECT_FALSE(fs::exists(out.file("x.png")));
+
+  r = brickyard("render " + scene + " --set stride=2 -o " + out.file("x.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("backend.params.stride"));
+  EXPECT_THAT(r.output, HasSubstr("'step'"));
+  EXPECT_FALSE(fs::exists(out.file("x.png")));
+
+  r = brickyard("render " + scene + " --backend reference --set step=0.25 -o " + out.file("x.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("reference 16x16"));
+}
+
+TEST_F(CliRender, ListBackendsNamesEveryBackEndWithItsParameters) {
+  const auto r = brickyard("render --list-backends");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("reference  (iso,dvr,mip)"));
+  EXPECT_THAT(r.output, HasSubstr("raymarch  (iso,dvr,mip)"));
+  EXPECT_THAT(r.output, HasSubstr("bench sweeps step = "));
+}
+
+TEST_F(CliRender, BenchWritesTableReportImagesAndCharts) {
+  testing::TempDir out;
+  const std::string scene = write_scene("bench.json", R"("image": {"width": 64, "height": 64}, )" + kCamera + ", " + kIso);
+  const std::string report = out.file("report");
+  const auto r = brickyard("-q bench " + scene + " --warm 1 --cold 1 --quality step=1,0.5 --out " + report);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+
+  const std::vector<std::string> csv = lines_of(testing::read_file(report + "/bench.csv"));
+  ASSERT_EQ(csv.size(), 4u) << testing::read_file(report + "/bench.csv");  // header, reference, 2 raymarch
+  EXPECT_THAT(csv[0], ::testing::StartsWith("backend,quality,"));
+  EXPECT_THAT(csv[1], ::testing::StartsWith("reference,"));
+  EXPECT_THAT(csv[2], ::testing::StartsWith("raymarch,step=1,"));
+  EXPECT_THAT(csv[3], ::testing::StartsWith("raymarch,step=0.5,"));
+  for (size_t i = 1; i < csv.size(); ++i) EXPECT_THAT(csv[i], HasSubstr(",64,64,")) << csv[i];
+
+  const std::string md = testing::read_file(report + "/bench.md");
+  EXPECT_THAT(md, HasSubstr("step=0.5"));
+  EXPECT_THAT(md, HasSubstr("reference"));
+  std::vector<std::string> images;
+  for (const auto& e : fs::directory_iterator(report + "/images")) images.push_back(e.path().filename().string());
+  EXPECT_THAT(images, ::testing::UnorderedElementsAre("reference.png", "raymarch-step_1.png", "raymarch-step_0.5.png"));
+  for (const std::string& img : images) EXPECT_EQ(read_png(report + "/images/" + img).width(), 64) << img;
+
+  // A misspelt knob is an error before anything is rendered, not the default sweep.
+  const auto typo = brickyard("-q bench " + scene + " --warm 1 --cold 0 --quality stepp=1,0.5 --out " + out.file("typo"));
+  EXPECT_EQ(typo.exit_code, 2) << typo.output;
+  EXPECT_THAT(typo.output, HasSubstr("--quality"));
+  EXPECT_THAT(typo.output, HasSubstr("'stepp'"));
+  EXPECT_FALSE(fs::exists(out.file("typo")));
+
+  if (!fs::exists("/usr/bin/gnuplot")) GTEST_SKIP() << "gnuplot is not installed: no charts to check";
+  for (const char* chart : {"error-vs-time.png", "contact-sheet.png"}) {
+    ASSERT_TRUE(fs::exists(report + "/" + chart)) << chart;
+    EXPECT_GT(read_png(report + "/" + chart).width(), 0) << chart;
+  }
+}
+
+}  // namespace
+}  // namespace brickyard
