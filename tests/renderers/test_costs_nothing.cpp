@@ -277,6 +277,25 @@ TEST_F(CostsNothing, IsoFetchesOnlyBricksWhoseRangeHoldsTheIsovalue) {
   }
 }
 
+TEST_F(CostsNothing, NormalizedIsovaluesAreMappedBeforeBricksAreChosen) {
+  // "values": "normalized": the filter uses the isovalue in the store's units.
+  BrickStore s(store());
+  const double lo = s.manifest().min_value, hi = s.manifest().max_value;
+  const double iso = 0.05, fraction = (iso - lo) / (hi - lo);
+  const Scene sc = scene(R"("values": "normalized", "mode": "iso", "isosurfaces": [{"value": )" + std::to_string(fraction) + "}]", 64);
+  for (const char* backend : kBackends) {
+    SCOPED_TRACE(backend);
+    int covered = 0;
+    const std::set<uint64_t> keys = fetched(sc, backend, {}, &covered);
+    EXPECT_GT(covered, 100);
+    ASSERT_FALSE(keys.empty());
+    for (uint64_t code : keys) {
+      const NodeRecord& n = s.nodes().at(BrickKey::from_code(code));
+      EXPECT_TRUE(n.min <= iso + 1e-6 && iso - 1e-6 <= n.max) << BrickKey::from_code(code).to_string();
+    }
+  }
+}
+
 TEST_F(CostsNothing, DvrFetchesOnlyBricksTheTransferFunctionMakesVisible) {
   BrickStore s(store());
   const int finest = s.layout().finest();

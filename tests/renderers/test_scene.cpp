@@ -77,6 +77,7 @@ TEST(Scene, ExampleSceneReadsEveryDocumentedKey) {
   expect_vec(c.target, 0.5, 0.5, 0.45);
   expect_vec(c.up, 0, 0, 1);
   EXPECT_DOUBLE_EQ(c.fov_degrees, 35);
+  EXPECT_FALSE(s.normalized_values);  // "values": "stored"
   EXPECT_EQ(s.mode, RenderMode::dvr);
   ASSERT_EQ(s.isosurfaces.size(), 1u);
   EXPECT_DOUBLE_EQ(s.isosurfaces[0].value, 0.5);
@@ -132,6 +133,7 @@ TEST(Scene, EveryKeyTakesANonDefaultValue) {
       "backend": { "name": "reference", "params": { "step": 0.25, "analytic": 1 } },
       "image": { "width": 320, "height": 200 },  /* block comment */
       "camera": { "eye": [0.1, 0.2, 3], "target": [0.4, 0.5, 0.6], "up": [0, 1, 0], "fov_degrees": 20 },
+      "values": "normalized",
       "mode": "iso",
       "isosurfaces": [ { "value": -1.5, "color": [1, 0, 0] }, { "value": 2, "color": [0, 0.5, 1] },
                        { "value": 3 }, { "value": 4.25, "color": [0, 0, 0] } ],
@@ -157,6 +159,7 @@ TEST(Scene, EveryKeyTakesANonDefaultValue) {
   expect_vec(s.camera.keyframes.at(0).eye, 0.1, 0.2, 3);
   expect_vec(s.camera.keyframes.at(0).up, 0, 1, 0);
   EXPECT_DOUBLE_EQ(s.camera.keyframes.at(0).fov_degrees, 20);
+  EXPECT_TRUE(s.normalized_values);
   EXPECT_EQ(s.mode, RenderMode::iso);
   ASSERT_EQ(s.isosurfaces.size(), 4u);
   EXPECT_DOUBLE_EQ(s.isosurfaces[0].value, -1.5);
@@ -196,6 +199,7 @@ TEST(Scene, DefaultsWhenOnlyTheRequiredKeysAreGiven) {
   EXPECT_TRUE(s.backend_params.empty());
   EXPECT_EQ(s.width, 512);
   EXPECT_EQ(s.mode, RenderMode::iso);
+  EXPECT_FALSE(s.normalized_values);
   EXPECT_EQ(s.shading.light, LightKind::headlight);
   EXPECT_EQ(s.shading.normals, NormalMethod::analytic);
   EXPECT_FALSE(s.shading.shadows);
@@ -274,6 +278,27 @@ TEST(Scene, CameraPathFromAFileRelativeToTheScene) {
   EXPECT_EQ(flight.camera.keyframes.size(), 6u);
 }
 
+TEST(Scene, NormalizedValuesMapOntoTheStoresRange) {
+  Scene s = parse_scene(scene_json(R"(, "values": "normalized", "isosurfaces": [{"value": 0.25}, {"value": 1}],
+      "transfer_function": {"points": [{"value": 0, "opacity": 0}, {"value": 0.5, "opacity": 0}, {"value": 1, "opacity": 0.5}]})"),
+                        "s.json");
+  ASSERT_TRUE(s.normalized_values);
+  normalize_values(s, 10, 30);
+  EXPECT_FALSE(s.normalized_values);
+  EXPECT_DOUBLE_EQ(s.isosurfaces[0].value, 15);
+  EXPECT_DOUBLE_EQ(s.isosurfaces[1].value, 30);
+  ASSERT_EQ(s.transfer_function.points().size(), 3u);
+  EXPECT_DOUBLE_EQ(s.transfer_function.points()[1].value, 20);
+  EXPECT_FALSE(s.transfer_function.visible(10, 19.9));  // the table follows the points
+  EXPECT_TRUE(s.transfer_function.visible(25, 26));
+  normalize_values(s, 0, 1000);  // mapped once only
+  EXPECT_DOUBLE_EQ(s.isosurfaces[0].value, 15);
+
+  Scene stored = parse_scene(scene_json(R"(, "isosurfaces": [{"value": 0.25}])"), "s.json");
+  normalize_values(stored, 10, 30);
+  EXPECT_DOUBLE_EQ(stored.isosurfaces[0].value, 0.25);
+}
+
 TEST(Scene, ValueRangeVisibilityFollowsTheMode) {
   Scene iso = parse_scene(scene_json(R"(, "isosurfaces": [{"value": 0.5}, {"value": 2}])"), "s.json");
   EXPECT_TRUE(iso.value_range_visible(0.0, 1.0));
@@ -344,6 +369,9 @@ INSTANTIATE_TEST_SUITE_P(
         BadScene{"ModeIsANumber", scene_json(R"(, "mode": 3)"), {"'mode'", "expected a string"}},
         BadScene{"UnknownMode", scene_json(R"(, "mode": "volume")"), {"'mode'", "'iso', 'dvr', 'mip'"}},
         BadScene{"ShadowsIsAString", scene_json(R"(, "shading": {"shadows": "yes"})"), {"'shading.shadows'", "true or false"}},
+        BadScene{"UnknownValues", scene_json(R"(, "values": "percent")"), {"'values'", "'stored', 'normalized'"}},
+        BadScene{"UnknownCachePolicy", scene_json(R"(, "cache": {"l1_policy": "lfu"})"), {"'cache.l1_policy'", "'lru'"}},
+        BadScene{"OfflineOnlyCachePolicy", scene_json(R"(, "cache": {"l2_policy": "opt"})"), {"'cache.l2_policy'"}},
         BadScene{"UnknownLight", scene_json(R"(, "shading": {"light": "sun"})"), {"'shading.light'", "'directional'"}},
         BadScene{"EyeHasTwoComponents", scene_json("", R"("camera": {"eye": [2, 0], "target": [0, 0, 0]})"), {"'camera.eye'", "[x, y, z]"}},
         BadScene{"BackgroundIsAString", scene_json(R"(, "background": "black")"), {"'background'"}},
