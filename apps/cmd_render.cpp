@@ -43,7 +43,7 @@ std::vector<int> parse_frames(const std::string& text, int count) {
   return out;
 }
 
-/// out.png -> out_0007.png when rendering several frames.
+/// out.png -> out_0007.png when rendering frames of a camera path.
 std::string frame_path(const std::string& path, int frame, bool several) {
   if (path.empty() || !several) return path;
   const fs::path p(path);
@@ -97,7 +97,7 @@ void run_render(const RenderOptions& o) {
   opts.params = parse_sets(o.sets, "--set");
   RenderSession session(scene, opts);
   const std::vector<int> frames = parse_frames(o.frames, scene.frames());
-  const bool several = frames.size() > 1;
+  const bool several = frames.size() > 1 || scene.has_path;  // path frames are always numbered
   FrameOutputs outputs;
   outputs.depth = true;
   outputs.normals = !o.normals.empty() || !o.error_maps.empty();
@@ -310,7 +310,8 @@ void run_bench(const BenchOptions& o) {
       row.image = fmt::format("images/{}-{}.png", safe_name(name), safe_name(row.quality));
       write_png((fs::path(o.out) / row.image).string(), to_rgba8(fb.color));
       std::cout << fmt::format("  {:<10} {:<10} {:>10} cold {:>10} warm  RMSE {:.4g}  SSIM {:.4f}  {} rays/s/core\n", name,
-                               row.quality, format_duration(row.cold_median_s), format_duration(row.warm_median_s),
+                               row.quality, row.cold_runs > 0 ? format_duration(row.cold_median_s) : "-",
+                               format_duration(row.warm_median_s),
                                row.error.rmse, row.error.ssim, format_count(row.rays_per_second_per_core));
       report.rows.push_back(row);
     }

@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "core/camera_json.h"
 #include "core/error.h"
 
 namespace brickyard {
@@ -78,57 +79,45 @@ Camera CameraPath::at(int frame) const {
   return c;
 }
 
-namespace {
-Vec3d vec3(const nlohmann::json& j, const char* key, const std::string& path, const std::string& where) {
-  auto it = j.find(key);
-  if (it == j.end()) throw Error(Errc::format, "missing key").with_file(path).with_field(where + key);
-  if (!it->is_array() || it->size() != 3 || !(*it)[0].is_number() || !(*it)[1].is_number() || !(*it)[2].is_number())
-    throw Error(Errc::format, "expected [x, y, z]").with_file(path).with_field(where + key);
-  return {(*it)[0].get<double>(), (*it)[1].get<double>(), (*it)[2].get<double>()};
+Camera read_camera(JsonObjectReader r, double fallback_fov) {
+  Camera cam;
+  cam.eye = r.vec3("eye");
+  cam.target = r.vec3("target");
+  cam.up = r.vec3("up", Vec3d(0, 0, 1));
+  cam.fov_degrees = r.number("fov_degrees", fallback_fov, 1e-3, 179.0);
+  if (length(cam.target - cam.eye) == 0) throw r.error("target", "eye and target coincide");
+  if (length(cross(cam.target - cam.eye, cam.up)) == 0) throw r.error("up", "up is parallel to the viewing direction");
+  r.finish();
+  return cam;
 }
-}  // namespace
+
+void read_camera_path(JsonObjectReader r, CameraPath& p) {
+  const double fov = r.number("fov_degrees", 45.0, 1e-3, 179.0);
+  p.frames = int(r.integer("frames", p.frames, 1, 1000000));
+  const nlohmann::json& kf = r.require("keyframes");
+  if (!kf.is_array() || kf.empty()) throw r.error("keyframes", "expected a non-empty array of cameras");
+  p.keyframes.clear();
+  for (size_t i = 0; i < kf.size(); ++i)
+    p.keyframes.push_back(read_camera(JsonObjectReader(kf[i], r.file(), r.path(fmt::format("keyframes[{}]", i))), fov));
+  r.finish();
+}
 
 CameraPath CameraPath::load(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(in, nullptr, true, true);  // comments allowed in scene files
-  } catch (const nlohmann::json::parse_error& e) {
-    throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(path);
-  }
+  const nlohmann::json j = read_json_file(path);
+  JsonObjectReader top(j, path);
   CameraPath p;
-  if (auto it = j.find("frames"); it != j.end()) {
-    if (!it->is_number_integer() || it->get<int>() < 1) throw Error(Errc::format, "expected a positive integer").with_file(path).with_field("frames");
-    p.frames = it->get<int>();
+  p.frames = int(top.integer("frames", 1, 1, 1000000));
+  if (top.has("image")) {
+    JsonObjectReader image = top.object("image");
+    p.width = int(image.integer("width", p.width, 1, 16384));
+    p.height = int(image.integer("height", p.height, 1, 16384));
+    image.finish();
   }
-  if (auto it = j.find("image"); it != j.end()) {
-    p.width = it->value("width", 640);
-    p.height = it->value("height", 480);
-    if (p.width < 1 || p.height < 1) throw Error(Errc::format, "image size must be positive").with_file(path).with_field("image");
-  }
-  auto read_camera = [&](const nlohmann::json& c, const std::string& where, double fov) {
-    Camera cam;
-    cam.eye = vec3(c, "eye", path, where);
-    cam.target = vec3(c, "target", path, where);
-    cam.up = c.contains("up") ? vec3(c, "up", path, where) : Vec3d(0, 0, 1);
-    cam.fov_degrees = c.value("fov_degrees", fov);
-    if (!(cam.fov_degrees > 0 && cam.fov_degrees < 180))
-      throw Error(Errc::format, "field of view must be in (0, 180) degrees").with_file(path).with_field(where + "fov_degrees");
-    if (length(cam.target - cam.eye) == 0) throw Error(Errc::format, "eye and target coincide").with_file(path).with_field(where + "eye");
-    return cam;
-  };
-  if (auto it = j.find("camera_path"); it != j.end()) {
-    const double fov = it->value("fov_degrees", 45.0);
-    auto kf = it->find("keyframes");
-    if (kf == it->end() || !kf->is_array() || kf->empty())
-      throw Error(Errc::format, "needs a non-empty array").with_file(path).with_field("camera_path.keyframes");
-    for (size_t i = 0; i < kf->size(); ++i) p.keyframes.push_back(read_camera((*kf)[i], fmt::format("camera_path.keyframes[{}].", i), fov));
-  } else if (auto c = j.find("camera"); c != j.end()) {
-    p.keyframes.push_back(read_camera(*c, "camera.", 45.0));
-  } else {
-    throw Error(Errc::format, "needs a 'camera' or a 'camera_path'").with_file(path);
-  }
+  const bool has_camera = top.has("camera"), has_path = top.has("camera_path");
+  if (has_camera == has_path) throw top.error(has_camera ? "camera_path" : "camera", "give exactly one of 'camera' and 'camera_path'");
+  if (has_path) read_camera_path(top.object("camera_path"), p);
+  else p.keyframes = {read_camera(top.object("camera"), 45.0)};
+  top.finish({"description"});
   return p;
 }
 

@@ -72,14 +72,37 @@ std::map<std::string, double> merged_params(const Scene& scene, const RenderSess
   for (const auto& [k, v] : o.params) p[k] = v;
   return p;
 }
+
+/// The back end a session uses. A name from the scene file is the file's error (Errc::format,
+/// naming it); a name from the caller (--backend) stays the caller's (invalid_argument).
+const BackendEntry* choose_backend(const Scene& scene, const RenderSession::Options& o) {
+  const BackendRegistry& registry = o.registry ? *o.registry : builtin_backends();
+  if (!o.backend.empty()) return &registry.find(o.backend);
+  try {
+    return &registry.find(scene.backend);
+  } catch (const Error& e) {
+    throw Error(Errc::format, e.message()).with_file(scene.file).with_field("backend");
+  }
+}
+
+BackendParams resolve_params(const BackendInfo& info, const Scene& scene, const RenderSession::Options& o) {
+  const bool from_scene = o.backend.empty() || o.backend == scene.backend;
+  try {
+    return BackendParams(info, merged_params(scene, o, info.name), from_scene ? scene.file : "");
+  } catch (const Error& e) {
+    // Parameters the scene gave are the scene file's error; --set ones the caller's.
+    const std::string name = e.field().substr(e.field().rfind('.') + 1);
+    if (!from_scene || !scene.backend_params.count(name) || o.params.count(name)) throw;
+    throw Error(Errc::format, e.message()).with_file(scene.file).with_field(e.field());
+  }
+}
 }  // namespace
 
 RenderSession::RenderSession(const Scene& scene, const Options& options)
     : scene_(scene),
       options_(options),
-      entry_(&builtin_backends().find(options.backend.empty() ? scene.backend : options.backend)),
-      params_(entry_->info, merged_params(scene_, options_, entry_->info.name),
-              options.backend.empty() || options.backend == scene.backend ? scene.file : "") {
+      entry_(choose_backend(scene_, options_)),
+      params_(resolve_params(entry_->info, scene_, options_)) {
   if (!entry_->info.accepts(DataKind::structured, scene_.mode))
     throw Error(Errc::invalid_argument, fmt::format("back end '{}' does not render {} mode on structured volumes",
                                                     entry_->info.name, to_string(scene_.mode)))

@@ -25,7 +25,8 @@ class RenderSession {
   struct Options {
     std::string backend;                      ///< "" : the scene's
     std::map<std::string, double> params;     ///< override or add to the scene's parameters
-    std::optional<CacheConfig> cache;         ///< "" : from the scene's budgets
+    std::optional<CacheConfig> cache;         ///< unset: from the scene's budgets
+    const BackendRegistry* registry = nullptr; ///< null: builtin_backends()
   };
 
   /// @throws Error naming the store or the back end; DataKind/mode mismatches name the key.

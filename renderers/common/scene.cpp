@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "cache/policy.h"
+#include "core/camera_json.h"
 #include "core/json_reader.h"
 #include "core/units.h"
 
@@ -58,18 +59,6 @@ Vec3f colour(JsonObjectReader& r, std::string_view key, Vec3f fallback) {
   for (int a = 0; a < 3; ++a)
     if (c[a] < 0 || c[a] > 1) throw r.error(key, "colour components must be in [0, 1]");
   return Vec3f(c);
-}
-
-Camera read_camera(JsonObjectReader r, double fallback_fov) {
-  Camera cam;
-  cam.eye = r.vec3("eye");
-  cam.target = r.vec3("target");
-  cam.up = r.vec3("up", Vec3d(0, 0, 1));
-  cam.fov_degrees = r.number("fov_degrees", fallback_fov, 1e-3, 179.0);
-  if (length(cam.target - cam.eye) == 0) throw r.error("target", "eye and target coincide");
-  if (length(cross(cam.target - cam.eye, cam.up)) == 0) throw r.error("up", "up is parallel to the viewing direction");
-  r.finish();
-  return cam;
 }
 
 uint64_t bytes(JsonObjectReader& r, std::string_view key, uint64_t fallback) {
@@ -134,14 +123,8 @@ void read_camera_or_path(JsonObjectReader& top, Scene& s, const std::filesystem:
     }
     return;
   }
-  JsonObjectReader r = top.object("camera_path");
-  const double fov = r.number("fov_degrees", 45.0, 1e-3, 179.0);
-  s.camera.frames = int(r.integer("frames", 60, 1, 1000000));
-  const nlohmann::json& kf = r.require("keyframes");
-  if (!kf.is_array() || kf.empty()) throw r.error("keyframes", "expected a non-empty array of cameras");
-  for (size_t i = 0; i < kf.size(); ++i)
-    s.camera.keyframes.push_back(read_camera(JsonObjectReader(kf[i], r.file(), r.path(fmt::format("keyframes[{}]", i))), fov));
-  r.finish();
+  s.camera.frames = 60;
+  read_camera_path(top.object("camera_path"), s.camera);
 }
 
 void read_transfer_function(JsonObjectReader& top, Scene& s) {

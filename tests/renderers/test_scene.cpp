@@ -528,7 +528,7 @@ TEST(RenderSession, RejectsAnUnknownParameterOfTheScenesBackEndBeforeOpeningTheS
     RenderSession session(s);
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
-    EXPECT_EQ(e.code(), Errc::invalid_argument);
+    EXPECT_EQ(e.code(), Errc::format);  // the scene file is at fault: exit 1
     EXPECT_THAT(e.what(), HasSubstr("/nowhere/scene.json"));
     EXPECT_THAT(e.what(), HasSubstr("backend.params.setp"));
   }
@@ -561,7 +561,7 @@ TEST(RenderSession, UnknownBackEndListsTheKnownOnesAndNamesTheScene) {
     RenderSession session(s);
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
-    EXPECT_EQ(e.code(), Errc::invalid_argument);
+    EXPECT_EQ(e.code(), Errc::format);  // the scene file is at fault: exit 1
     EXPECT_THAT(e.what(), HasSubstr("'raytrace'"));
     EXPECT_THAT(e.what(), HasSubstr("'reference', 'raymarch'"));
     EXPECT_THAT(e.what(), HasSubstr("backend"));
