@@ -151,6 +151,53 @@ class TrilinearSampler {
     gradient = trilinear_gradient(c_, u[0], u[1], u[2]);
     return trilinear(c_, u[0], u[1], u[2]);
   }
+  /// @brief Value at p with its cell confined to cells [lo, hi] per axis (p outside them
+  /// clamps to their faces): reads only the bricks those cells lie in.
+  V sample_within(const Vec3<V>& p, const int64_t lo[3], const int64_t hi[3]) {
+    int64_t cell[3];
+    V u[3];
+    for (int a = 0; a < 3; ++a) {
+      const V x = std::clamp(p[a], V(lo[a]), V(hi[a] + (cells_.dims()[a] > 1 ? 1 : 0)));
+      cell[a] = std::clamp<int64_t>(int64_t(x), lo[a], hi[a]);
+      u[a] = cells_.dims()[a] > 1 ? std::clamp(x - V(cell[a]), V(0), V(1)) : V(0);
+    }
+    load(cell);
+    return trilinear(c_, u[0], u[1], u[2]);
+  }
+
+  /// @brief Gradient (voxel units) by central or forward differences one voxel apart,
+  /// confined to the brick that holds p's cell: one-sided at its faces, so that shading never
+  /// fetches a brick the ray itself did not need (a neighbour whose values cannot contribute).
+  /// Takes 6 (central) or 4 (forward) samples.
+  Vec3<V> difference_gradient(const Vec3<V>& p, bool central, int64_t brick_size) {
+    int64_t lo[3], hi[3];
+    V plo[3], phi[3];
+    for (int a = 0; a < 3; ++a) {
+      const int64_t cell = std::clamp<int64_t>(int64_t(std::max(p[a], V(0))), 0, last_cell_[a]);
+      lo[a] = cell / brick_size * brick_size;
+      hi[a] = std::min(lo[a] + brick_size - 1, last_cell_[a]);
+      plo[a] = V(lo[a]);
+      phi[a] = V(std::min(hi[a] + 1, cells_.dims()[a] - 1));
+    }
+    Vec3<V> g;
+    const V f0 = central ? V(0) : sample_within(p, lo, hi);
+    for (int a = 0; a < 3; ++a) {
+      Vec3<V> q1 = p, q0 = p;
+      q1[a] = std::min(p[a] + V(1), phi[a]);
+      q0[a] = central ? std::max(p[a] - V(1), plo[a]) : p[a];
+      if (!central && q1[a] - q0[a] < V(0.5)) q0[a] = std::max(p[a] - V(1), plo[a]);  // at the upper face: backward
+      const V span = q1[a] - q0[a];
+      if (!(span > V(0))) {
+        g[a] = 0;  // a flat axis (1-voxel-thick volume)
+        continue;
+      }
+      const V f1 = sample_within(q1, lo, hi);
+      const V fm = (!central && q0[a] == p[a]) ? f0 : sample_within(q0, lo, hi);
+      g[a] = (f1 - fm) / span;
+    }
+    return g;
+  }
+
   CellAccessor<Stored>& cells() { return cells_; }
   const Vec3s& dims() const { return cells_.dims(); }
 

@@ -36,6 +36,7 @@ class RaymarchRenderer final : public Renderer {
     const auto& level = ctx.nodes().level(finest_);
     visible_.resize(level.size());
     for (size_t i = 0; i < level.size(); ++i) visible_[i] = ctx.node_visible(level[i]);
+    if (scene_.mode == RenderMode::dvr) tf_table_ = TfTable(scene_.transfer_function, step_);
   }
 
   void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
@@ -90,23 +91,13 @@ class RaymarchRenderer final : public Renderer {
       switch (r.scene_.shading.normals) {
         case NormalMethod::analytic: sampler.sample(p, g); break;
         case NormalMethod::central:
-          for (int a = 0; a < 3; ++a) {
-            Vec3f e(0.0f);
-            e[a] = 1;
-            g[a] = 0.5f * (sampler.sample(p + e) - sampler.sample(p - e));
-          }
+          g = sampler.difference_gradient(p, true, int64_t(r.M_));
           counters.samples += 6;
           break;
-        case NormalMethod::forward: {
-          const float f0 = sampler.sample(p);
-          for (int a = 0; a < 3; ++a) {
-            Vec3f e(0.0f);
-            e[a] = 1;
-            g[a] = sampler.sample(p + e) - f0;
-          }
+        case NormalMethod::forward:
+          g = sampler.difference_gradient(p, false, int64_t(r.M_));
           counters.samples += 4;
           break;
-        }
       }
       return Vec3d(g) / r.geo_.spacing;
     }
@@ -201,8 +192,6 @@ class RaymarchRenderer final : public Renderer {
 
     void dvr(const Rayd& world_ray, const Vec3d& o, const Vec3d& d, Interval<double> span, double dt, Vec3f& color,
              float& alpha, double& depth, Vec3d& normal) {
-      const TransferFunction& tf = r.scene_.transfer_function;
-      const float h = float(r.step_);
       const float stop = float(r.scene_.quality.termination_opacity);
       Vec3f accum(0.0f);
       float a_acc = 0;
@@ -212,10 +201,9 @@ class RaymarchRenderer final : public Renderer {
         ++counters.samples;
         const float v = sampler.sample(q);
         Vec3f c;
-        float a_tf;
-        tf.eval(v, c, a_tf);
-        if (!(a_tf > 0)) return true;
-        const float a = 1 - std::pow(1 - a_tf, h);
+        float a;
+        r.tf_table_.lookup(v, c, a);
+        if (!(a > 0)) return true;
         Vec3d n(0.0);
         if (gradients) n = facing_normal(gradient_world(Vec3d(q)), world_ray.dir);
         if (lit) {
@@ -267,6 +255,7 @@ class RaymarchRenderer final : public Renderer {
   double M_ = 32;
   double step_ = 0.5;
   std::vector<uint8_t> visible_;
+  TfTable tf_table_;  // opacity corrected for step_
 };
 
 }  // namespace

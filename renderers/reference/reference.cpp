@@ -132,7 +132,9 @@ class ReferenceRenderer final : public Renderer {
       float alpha = 0;
       double depth = kInf;
       Vec3d normal(0.0);
-      if (!span.empty()) {
+      // A ray without a direction (a camera whose eye and target coincide, as normalised
+      // cameras do on a volume of zero extent) has an unbounded span: it sees nothing.
+      if (!span.empty() && std::isfinite(span.t1)) {
         switch (r.scene_.mode) {
           case RenderMode::iso: iso(world_ray, o, d, span, color, alpha, depth, normal); break;
           case RenderMode::dvr: dvr(world_ray, o, d, span, color, alpha, depth, normal); break;
@@ -230,23 +232,13 @@ class ReferenceRenderer final : public Renderer {
       switch (r.scene_.shading.normals) {
         case NormalMethod::analytic: g = exact_voxel; break;
         case NormalMethod::central:
-          for (int a = 0; a < 3; ++a) {
-            Vec3d e(0.0);
-            e[a] = 1;
-            g[a] = 0.5 * (sampler.sample(q + e) - sampler.sample(q - e));
-          }
+          g = sampler.difference_gradient(q, true, r.M_);
           counters.samples += 6;
           break;
-        case NormalMethod::forward: {
-          const double f0 = sampler.sample(q);
-          for (int a = 0; a < 3; ++a) {
-            Vec3d e(0.0);
-            e[a] = 1;
-            g[a] = sampler.sample(q + e) - f0;
-          }
+        case NormalMethod::forward:
+          g = sampler.difference_gradient(q, false, r.M_);
           counters.samples += 4;
           break;
-        }
       }
       return g / r.geo_.spacing;
     }

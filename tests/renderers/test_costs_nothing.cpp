@@ -342,7 +342,7 @@ TEST_F(CostsNothing, DvrFetchesOnlyBricksTheTransferFunctionMakesVisible) {
 // face, beyond the apron.) Enable once the stencil stays inside the brick (one-sided
 // differences at faces, or a wider apron), or drop it if the scene format documents the
 // exception.
-TEST_F(CostsNothing, DISABLED_DifferenceNormalsFetchOnlyBricksThatCanContribute) {
+TEST_F(CostsNothing, DifferenceNormalsFetchOnlyBricksThatCanContribute) {
   BrickStore s(store());
   const std::string band = R"("mode": "dvr", "transfer_function": {"points": [
       {"value": -1, "opacity": 0}, {"value": -0.04, "opacity": 0}, {"value": 0.0, "opacity": 0.3},
