@@ -51,9 +51,16 @@ bool Camera::may_see(const Box3d& box, int width, int height) const {
 
 Camera Camera::in_box(const Box3d& world) const {
   Camera c = *this;
+  // A flat axis (a slice, a 1-voxel volume) has no extent to scale by: it takes the largest
+  // extent (1 for a point), centred on the box, so eye and target stay apart.
   const Vec3d e = world.extent();
-  c.eye = world.lo + eye * e;
-  c.target = world.lo + target * e;
+  const double fallback = max_component(e) > 0 ? max_component(e) : 1.0;
+  for (int a = 0; a < 3; ++a) {
+    const double scale = e[a] > 0 ? e[a] : fallback;
+    const double base = e[a] > 0 ? world.lo[a] : world.lo[a] - 0.5 * scale;
+    c.eye[a] = base + eye[a] * scale;
+    c.target[a] = base + target[a] * scale;
+  }
   return c;
 }
 

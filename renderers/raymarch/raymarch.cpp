@@ -58,11 +58,12 @@ class RaymarchRenderer final : public Renderer {
 
     /// Calls f(t) at every fixed sample position t0 + (k + 1/2) dt inside a visible brick,
     /// in order, until f returns false. `entered(t)` is called when the ray enters a visible
-    /// brick after skipping (the last sample before it is unknown).
+    /// brick after skipping (the last sample before it is unknown). Returns whether the ray
+    /// left the region from a visible brick without being stopped (a last part-step remains).
     template <typename OnSample, typename OnEnter>
-    void march(const Vec3d& o, const Vec3d& d, double t0, double t1, double dt, OnSample&& on_sample, OnEnter&& entered) {
+    bool march(const Vec3d& o, const Vec3d& d, double t0, double t1, double dt, OnSample&& on_sample, OnEnter&& entered) {
       const double inv_m = 1.0 / r.M_;
-      bool skipped = true;
+      bool skipped = true, stopped = false;
       walk_cells(o * inv_m, d * inv_m, t0, t1, r.bricks_, [&](const int64_t b[3], double ta, double tb) {
         ++counters.nodes;
         const size_t index = size_t((b[2] * r.bricks_.y + b[1]) * r.bricks_.x + b[0]);
@@ -70,13 +71,14 @@ class RaymarchRenderer final : public Renderer {
           skipped = true;
           return true;
         }
-        if (skipped && !entered(ta)) return false;
+        if (skipped && !entered(ta)) return !(stopped = true);
         skipped = false;
         double k = std::ceil((ta - t0) / dt - 0.5);
         for (double t = t0 + (std::max(k, 0.0) + 0.5) * dt; t < tb; t += dt)
-          if (!on_sample(t)) return false;
+          if (!on_sample(t)) return !(stopped = true);
         return true;
       });
+      return !skipped && !stopped;
     }
 
     float sample(const Vec3d& o, const Vec3d& d, double t) {
@@ -157,10 +159,12 @@ class RaymarchRenderer final : public Renderer {
         have_prev = true;
         return hit_s < 0;
       };
-      march(o, d, t0, t1, dt, take, [&](double ta) {
+      const bool open_end = march(o, d, t0, t1, dt, take, [&](double ta) {
         have_prev = false;
         return take(ta + 1e-4 * dt);  // just inside the visible brick
       });
+      // The part-step between the last sample and the exit: a crossing there is still seen.
+      if (open_end && have_prev && t1 - t_prev > 1e-3 * dt) take(t1 - 1e-4 * dt);
       return {hit_t, hit_s};
     }
 

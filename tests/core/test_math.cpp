@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include "core/camera.h"
 #include "core/math.h"
 
 namespace brickyard {
@@ -74,3 +75,19 @@ TEST(RayBox, AxisParallelRayOnAFacePlaneIsNotNaN) {
 
 }  // namespace
 }  // namespace brickyard
+
+TEST(Camera, InBoxMapsNormalisedCoordinatesAndKeepsFlatAxesApart) {
+  Camera c;
+  c.eye = {0.5, -1.0, 0.5};
+  c.target = {0.5, 0.5, 0.5};
+  const Camera w = c.in_box(Box3d({0, 0, 0}, {10, 20, 30}));
+  EXPECT_EQ(w.eye, Vec3d(5, -20, 15));
+  EXPECT_EQ(w.target, Vec3d(5, 10, 15));
+  // A slice (zero extent in z) and a single voxel: eye and target must not coincide.
+  c.eye = {0.5, 0.5, 2.0};
+  const Camera slice = c.in_box(Box3d({0, 0, 4}, {10, 10, 4}));
+  EXPECT_EQ(slice.target, Vec3d(5, 5, 4));
+  EXPECT_EQ(slice.eye, Vec3d(5, 5, 4 + 1.5 * 10));
+  const Camera point = c.in_box(Box3d({1, 1, 1}, {1, 1, 1}));
+  EXPECT_GT(length(point.eye - point.target), 1.0);
+}
