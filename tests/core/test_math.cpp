@@ -73,9 +73,6 @@ TEST(RayBox, AxisParallelRayOnAFacePlaneIsNotNaN) {
   EXPECT_TRUE(intersect(Rayd({-2, -0.1, 0.5}, {1, 0, 0}), box).empty());
 }
 
-}  // namespace
-}  // namespace brickyard
-
 TEST(Camera, InBoxMapsNormalisedCoordinatesAndKeepsFlatAxesApart) {
   Camera c;
   c.eye = {0.5, -1.0, 0.5};
@@ -91,3 +88,6 @@ TEST(Camera, InBoxMapsNormalisedCoordinatesAndKeepsFlatAxesApart) {
   const Camera point = c.in_box(Box3d({1, 1, 1}, {1, 1, 1}));
   EXPECT_GT(length(point.eye - point.target), 1.0);
 }
+
+}  // namespace
+}  // namespace brickyard
