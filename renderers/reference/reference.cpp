@@ -26,6 +26,7 @@
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
 #include "renderers/common/grid_walk.h"
+#include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
 
@@ -124,26 +125,17 @@ class ReferenceRenderer final : public Renderer {
 
     void pixel(int x, int y, FrameBuffers& out) {
       ++counters.rays;
-      const Rayd world_ray = setup.camera.ray(x + 0.5, y + 0.5, setup.width, setup.height);
-      const Vec3d o = r.geo_.to_voxel(world_ray.org), d = world_ray.dir / r.geo_.spacing;
-      Interval<double> span = intersect(Rayd(o, d), r.geo_.voxel_clip);
-      span.t0 = std::max(span.t0, 0.0);
-      Vec3f color = r.scene_.background;
-      float alpha = 0;
-      double depth = kInf;
-      Vec3d normal(0.0);
-      // A ray without a direction (a camera whose eye and target coincide, as normalised
-      // cameras do on a volume of zero extent) has an unbounded span: it sees nothing.
-      if (!span.empty() && std::isfinite(span.t1)) {
+      const PrimaryRay ray = primary_ray(setup, r.geo_, x, y);
+      PixelResult px;
+      px.color = r.scene_.background;
+      if (ray.hits()) {
         switch (r.scene_.mode) {
-          case RenderMode::iso: iso(world_ray, o, d, span, color, alpha, depth, normal); break;
-          case RenderMode::dvr: dvr(world_ray, o, d, span, color, alpha, depth, normal); break;
-          case RenderMode::mip: mip(o, d, span, color, alpha, depth); break;
+          case RenderMode::iso: iso(ray.world, ray.org, ray.dir, ray.span, px.color, px.alpha, px.depth, px.normal); break;
+          case RenderMode::dvr: dvr(ray.world, ray.org, ray.dir, ray.span, px.color, px.alpha, px.depth, px.normal); break;
+          case RenderMode::mip: mip(ray.org, ray.dir, ray.span, px); break;
         }
       }
-      out.color(x, y) = {color.x, color.y, color.z, alpha};
-      if (!out.depth.empty()) out.depth(x, y) = float(depth);
-      if (!out.normal.empty()) out.normal(x, y) = Vec3f(normal);
+      write_pixel(out, x, y, px);
     }
 
     // --- isosurfaces -------------------------------------------------------------------
@@ -326,7 +318,7 @@ class ReferenceRenderer final : public Renderer {
     }
 
     // --- maximum intensity projection ---------------------------------------------------
-    void mip(const Vec3d& o, const Vec3d& d, Interval<double> span, Vec3f& color, float& alpha, double& depth) {
+    void mip(const Vec3d& o, const Vec3d& d, Interval<double> span, PixelResult& px) {
       double best = -kInf, best_t = kInf;
       if (r.truth_ && r.p_.analytic) {
         const double dt = r.p_.step / length(d);
@@ -351,17 +343,8 @@ class ReferenceRenderer final : public Renderer {
         });
       }
       if (best == -kInf) return;
-      depth = best_t;
-      Vec3f c;
-      float a = 1;
-      if (!r.scene_.transfer_function.empty()) {
-        r.scene_.transfer_function.eval(best, c, a);
-      } else {
-        const double lo = r.ctx_.manifest().min_value, hi = r.ctx_.manifest().max_value;
-        c = Vec3f(float(hi > lo ? std::clamp((best - lo) / (hi - lo), 0.0, 1.0) : 1.0));
-      }
-      color = c * a + r.scene_.background * (1 - a);
-      alpha = a;
+      px.depth = best_t;
+      mip_color(r.ctx_, double(best), px);
     }
   };
 
