@@ -32,6 +32,6 @@ echo "  flight.bytrace      every cache access of a 120-frame camera flight (sce
 echo "  cache-stats.json    the cache's statistics after the flight"
 echo "  miss-ratio.png      miss ratio against cache size for every policy and OPT (data: miss-ratio.png.csv)"
 echo "  dvr.png             a direct volume rendering of it (scenes/default-dvr.json), statistics in dvr-stats.json"
-echo "  bench/              every back end against the reference renderer (scenes/default-iso.json):"
+echo "  bench/              every back end against the reference renderer (scenes/default-iso.json)"
 echo
 echo "report: $out/bench/bench.md  (error-vs-time.png, contact-sheet.png, bench.csv, images/)"
