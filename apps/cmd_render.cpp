@@ -172,7 +172,9 @@ BenchRow measure(RenderSession& session, int frame, int cold, int warm, const Fr
     stats = session.render(frame, last, outputs);
     cold_s.push_back(stats.seconds);
   }
-  if (cold == 0) session.render(frame, last, outputs);  // warm the cache up
+  // Warm: the cache filled and the back end converged (asynchronous back ends refine over
+  // frames as their data arrives).
+  row.settle_frames = session.settle(frame, outputs);
   for (int i = 0; i < warm; ++i) {
     stats = session.render(frame, last, outputs);
     warm_s.push_back(stats.seconds);

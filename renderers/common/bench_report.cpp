@@ -113,16 +113,16 @@ void write_text(const std::string& path, const std::string& text) {
 std::string csv_text(const BenchReport& report, const std::vector<bool>& on_front) {
   std::string out =
       "backend,quality,quality_value,width,height,threads,cold_median_s,cold_p95_s,warm_median_s,warm_p95_s,"
-      "cold_runs,warm_runs,is_reference,pareto,rays_per_second_per_core,samples,bricks,bytes_read,rmse,psnr_db,ssim,"
+      "cold_runs,warm_runs,settle_frames,is_reference,pareto,rays_per_second_per_core,samples,bricks,bytes_read,rmse,psnr_db,ssim,"
       "depth_mean,depth_p99,depth_max,normal_mean_deg,normal_p99_deg,depth_pixels,normal_pixels,coverage_mismatch,"
       "coverage_mismatch_fraction,nonfinite_color_pixels,image\n";
   for (size_t i = 0; i < report.rows.size(); ++i) {
     const BenchRow& r = report.rows[i];
     const ImageError& e = r.error;
-    out += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},", csv_field(r.backend),
+    out += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},", csv_field(r.backend),
                        csv_field(r.quality), csv_number(r.quality_value), r.width, r.height, r.threads,
                        csv_number(r.cold_median_s), csv_number(r.cold_p95_s), csv_number(r.warm_median_s),
-                       csv_number(r.warm_p95_s), r.cold_runs, r.warm_runs, int(r.is_reference), int(on_front[i]),
+                       csv_number(r.warm_p95_s), r.cold_runs, r.warm_runs, r.settle_frames, int(r.is_reference), int(on_front[i]),
                        csv_number(r.rays_per_second_per_core), r.samples, r.bricks, r.bytes_read);
     out += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", csv_number(e.rmse), csv_number(e.psnr_db),
                        csv_number(e.ssim), csv_number(e.depth_mean), csv_number(e.depth_p99), csv_number(e.depth_max),

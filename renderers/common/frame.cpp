@@ -27,6 +27,12 @@ double FrameStats::phase(const std::string& name) const {
   return 0;
 }
 
+double FrameStats::backend_value(const std::string& name) const {
+  for (const auto& [n, v] : backend)
+    if (n == name) return v;
+  return 0;
+}
+
 void FrameStats::add_phase(const std::string& name, double s) {
   for (auto& p : phases)
     if (p.name == name) {
@@ -46,6 +52,9 @@ std::string FrameStats::to_json() const {
   nlohmann::ordered_json ph = nlohmann::ordered_json::object();
   for (const auto& p : phases) ph[p.name] = p.seconds;
   j["phases"] = ph;
+  nlohmann::ordered_json be = nlohmann::ordered_json::object();
+  for (const auto& [name, value] : backend) be[name] = value;
+  j["backend"] = be;
   const RayCounters& c = counters;
   j["rays"] = c.rays;
   j["samples"] = c.samples;

@@ -82,7 +82,11 @@ struct FrameStats {
   uint64_t bytes_read = 0;      ///< compressed bytes read from the store
   uint64_t bytes_decoded = 0;
 
+  /// Figures particular to the back end (working set, index size, culled nodes), by name.
+  std::vector<std::pair<std::string, double>> backend;
+
   double phase(const std::string& name) const;
+  double backend_value(const std::string& name) const;
   void add_phase(const std::string& name, double seconds);
   std::string to_json() const;
 };

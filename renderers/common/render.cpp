@@ -45,6 +45,7 @@ FrameStats render_frame(Renderer& renderer, const RenderContext& context, const 
   const FrameReport report = cache.frame_end();
   stats.add_phase("finish", watch.seconds());
   stats.seconds = frame_watch.seconds();
+  renderer.add_statistics(stats);
 
   const CacheStats after = cache.stats();
   stats.requests = report.requests;
@@ -125,6 +126,18 @@ void RenderSession::build() {
 }
 
 void RenderSession::reset_cache() { build(); }
+
+bool RenderSession::converged() const { return renderer_->converged(); }
+
+int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames) {
+  FrameBuffers scratch;
+  for (int n = 1; n <= max_frames; ++n) {
+    render(frame, scratch, outputs);
+    cache_->wait_idle();  // the loader serves this frame's requests before the next one
+    if (renderer_->converged()) return n;
+  }
+  return max_frames;
+}
 
 Camera RenderSession::camera(int frame) const {
   return scene_.camera.at(std::clamp(frame, 0, scene_.frames() - 1)).in_box(context_->geometry().world);

@@ -46,6 +46,11 @@ class RenderSession {
   FrameStats render(int frame, FrameBuffers& out, const FrameOutputs& outputs = {});
   /// @brief Drops every cached brick (a new cache and back end): the next frame is cold.
   void reset_cache();
+  /// @brief Whether the back end's last frame was complete (see Renderer::converged()).
+  bool converged() const;
+  /// @brief Renders frame `frame` repeatedly, letting the loader serve each frame's requests,
+  /// until the back end converges (at most max_frames); returns the frames it took.
+  int settle(int frame, const FrameOutputs& outputs, int max_frames = 500);
 
  private:
   void build();

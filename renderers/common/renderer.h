@@ -122,6 +122,12 @@ class Renderer {
   virtual void begin_frame(const FrameSetup& setup) { (void)setup; }
   virtual void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const = 0;
   virtual void end_frame(const FrameSetup& setup, const FrameBuffers& out) { (void)setup, (void)out; }
+  /// @brief Adds the back end's own figures (phases, working-set sizes) to the frame's statistics.
+  virtual void add_statistics(FrameStats& stats) const { (void)stats; }
+  /// @brief Whether the last frame showed everything the back end wants to show: false while
+  /// an asynchronous back end is still refining or waiting for data (the image converges over
+  /// frames). Benchmarks settle back ends before timing warm frames.
+  virtual bool converged() const { return true; }
 };
 
 using BackendFactory = std::function<std::unique_ptr<Renderer>(const RenderContext&, const BackendParams&)>;

@@ -160,7 +160,7 @@ TEST(BenchReport, CsvHasEveryColumnOnEveryLineAndQuotesLabels) {
   const auto records = parse_csv(testing::read_file(dir.file("out/bench.csv")));
   ASSERT_EQ(records.size(), report.rows.size() + 1);
   const size_t columns = records[0].size();
-  EXPECT_EQ(columns, 32u);
+  EXPECT_EQ(columns, 33u);
   for (const auto& r : records) EXPECT_EQ(r.size(), columns);
   auto column = [&](const std::string& name) {
     return size_t(std::find(records[0].begin(), records[0].end(), name) - records[0].begin());
