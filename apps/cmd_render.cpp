@@ -66,6 +66,7 @@ struct RenderOptions {
   std::string scene, out, depth, normals, stats, frames, backend, error_maps;
   std::vector<std::string> sets;
   bool list = false;
+  bool settle = false;
 };
 
 void print_backends() {
@@ -111,11 +112,16 @@ void run_render(const RenderOptions& o) {
   nlohmann::json all = nlohmann::json::array();
   for (int f : frames) {
     FrameBuffers fb;
+    // A still camera shows the converged image (asynchronous back ends refine over frames as
+    // their data arrives); a camera path is flown frame by frame unless --settle.
+    int settle_frames = 0;
+    if (!scene.has_path || o.settle) settle_frames = session.settle(f, outputs);
     const FrameStats stats = session.render(f, fb, outputs);
     write_png(frame_path(o.out, f, several), to_rgba8(fb.color));
     if (!o.depth.empty()) write_png(frame_path(o.depth, f, several), depth_to_rgba8(fb.depth));
     if (!o.normals.empty()) write_png(frame_path(o.normals, f, several), normals_to_rgba8(fb.normal));
     nlohmann::json j = nlohmann::json::parse(stats.to_json());
+    j["settle_frames"] = settle_frames;
     std::string error_line;
     if (reference) {
       FrameBuffers ref;
@@ -350,6 +356,7 @@ void add_render_commands(CLI::App& app) {
     cmd->add_option("--set", o->sets, "Back-end parameter NAME=VALUE (repeatable)");
     cmd->add_option("--error-maps", o->error_maps, "Also render the reference; print the error and write heat maps into this directory");
     cmd->add_flag("--list-backends", o->list, "List the back ends, their modes and parameters");
+    cmd->add_flag("--settle", o->settle, "Camera paths: let asynchronous back ends converge on every frame (a still camera always does)");
     cmd->callback([o] { run_render(*o); });
   }
   {

@@ -6,7 +6,8 @@
 
 #define BRICKYARD_BACKENDS(X) \
   X(reference)                \
-  X(raymarch)
+  X(raymarch)                 \
+  X(gobbetti)
 
 namespace brickyard {
 

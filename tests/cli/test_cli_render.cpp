@@ -189,7 +189,7 @@ TEST_F(CliRender, BenchWritesTableReportImagesAndCharts) {
   testing::TempDir out;
   const std::string scene = write_scene("bench.json", R"("image": {"width": 64, "height": 64}, )" + kCamera + ", " + kIso);
   const std::string report = out.file("report");
-  const auto r = brickyard("-q bench " + scene + " --warm 1 --cold 1 --quality step=1,0.5 --out " + report);
+  const auto r = brickyard("-q bench " + scene + " --backends raymarch --warm 1 --cold 1 --quality step=1,0.5 --out " + report);
   ASSERT_EQ(r.exit_code, 0) << r.output;
 
   const std::vector<std::string> csv = lines_of(testing::read_file(report + "/bench.csv"));

@@ -1,0 +1,646 @@
+// `gobbetti`: single-pass out-of-core ray casting after Gobbetti, Marton and Iglesias Guitian
+// (2008), on the CPU, keeping the GPU design: the L1 pool is the "GPU texture cache", the L2
+// host cache the "CPU cache", the store the out-of-core brick octree.
+//
+// Per frame (begin_frame, one thread):
+//   1. Refine a cut of the brick octree from the root, largest projected voxel first. Leaves
+//      are nodes that are empty for this scene (isovalue outside the node's range, zero opacity
+//      by the transfer function's summed-area table), outside the frustum, adequate (a voxel
+//      covers at most lod_ratio pixels), occluded in the last query (visibility feedback), or
+//      whose children are not resident yet: then requests are posted (within the per-frame
+//      upload budget) and refinement goes on elsewhere; it never waits. The cut never holds
+//      more data leaves than the L1 pool has slots.
+//   2. Rebuild the spatial index from the cut (octree with neighbour links; spatial_index.h).
+// Per tile (many threads): stackless traversal of the index, sampling each leaf's brick with a
+// step matched to its level and opacity corrected per level (a transfer-function table per
+// level), isosurface bracketing and bisection, or DVR with early termination.
+// After the frame (end_frame): occlusion queries of the cut's leaf boxes against the frame's
+// depth of opacity, for one group of screen tiles per frame, propagated to parents, recorded
+// through the cache's visibility feedback.
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <queue>
+#include <unordered_map>
+
+#include <fmt/format.h>
+
+#include "core/timing.h"
+#include "renderers/common/cell_accessor.h"
+#include "renderers/common/pixel.h"
+#include "renderers/common/renderer.h"
+#include "renderers/common/shading.h"
+#include "renderers/gobbetti/spatial_index.h"
+
+namespace brickyard {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr uint32_t kEmptyLeaf = 0xffffffffu;   // nothing to sample
+constexpr uint32_t kConstantLeaf = 0x80000000u; // | index into the frame's constants
+
+struct GobbettiParams {
+  double lod_ratio = 0;       // 0: the scene's quality.lod_ratio
+  double step = 0.5;          // in voxels of the leaf's level
+  int upload_budget = 256;    // new brick requests per frame
+  bool visibility = true;
+  int visibility_pixels = 4;
+  int visibility_groups = 4;  // screen-tile groups: every node is queried within this many frames
+  int refine = 6;             // bisection steps refining an isosurface crossing
+};
+
+template <typename Stored>
+class GobbettiRenderer final : public Renderer {
+ public:
+  GobbettiRenderer(const RenderContext& ctx, const GobbettiParams& p)
+      : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), layout_(ctx.layout()), p_(p), shading_(scene_.shading, geo_) {
+    lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
+    M_ = layout_.brick_size;
+    A_ = ctx.cache().format().apron;
+    E_ = ctx.cache().format().edge();
+    if (A_ < 1)
+      throw Error(Errc::unsupported, "gobbetti samples bricks through their apron: the store needs an apron of at least 1")
+          .with_file(ctx.cache().store().path());
+    const double factor = scene_.mode == RenderMode::iso ? scene_.quality.step_factor
+                                                         : scene_.quality.step_factor / scene_.sampling_rate;
+    for (int l = 0; l < layout_.levels; ++l) {
+      const double step_finest = p.step * factor * double(int64_t(1) << layout_.steps(l));
+      step_by_level_.push_back(step_finest);
+      if (scene_.mode == RenderMode::dvr) tf_by_level_.emplace_back(scene_.transfer_function, step_finest);
+    }
+  }
+
+  // --- per frame: refinement and the spatial index ---------------------------------------
+  void begin_frame(const FrameSetup& setup) override {
+    Stopwatch watch;
+    ++frame_;
+    refine(setup);
+    refine_seconds_ = watch.seconds();
+    watch.restart();
+    index_.build(layout_, leaves_);
+    index_seconds_ = watch.seconds();
+    if (occlusion_.width() != setup.width || occlusion_.height() != setup.height)
+      occlusion_ = FloatImage(setup.width, setup.height);
+  }
+
+  void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
+    Tracer t(*this, setup, counters);
+    for (int y = tile.y0; y < tile.y1; ++y)
+      for (int x = tile.x0; x < tile.x1; ++x) t.pixel(x, y, out);
+  }
+
+  void end_frame(const FrameSetup& setup, const FrameBuffers& out) override {
+    (void)out;
+    Stopwatch watch;
+    if (p_.visibility) query_visibility(setup);
+    visibility_seconds_ = watch.seconds();
+    // The pins of this frame's cut end with the frame (the next cut pins again).
+    for (BrickHandle& h : handles_) h.release();
+  }
+
+  void add_statistics(FrameStats& stats) const override {
+    stats.add_phase("refine", refine_seconds_);
+    stats.add_phase("index", index_seconds_);
+    stats.add_phase("visibility", visibility_seconds_);
+    stats.backend = {{"leaves", double(leaves_.size())},
+                     {"working_set", double(data_leaves_)},
+                     {"constant_leaves", double(constant_leaves_)},
+                     {"empty_leaves", double(leaves_.size() - data_leaves_ - constant_leaves_)},
+                     {"index_nodes", double(index_.node_count())},
+                     {"deferred_refinements", double(deferred_)},
+                     {"occluded_not_refined", double(occluded_)},
+                     {"requests_posted", double(requests_)},
+                     {"visibility_queries", double(queries_)},
+                     {"refine_ms", refine_seconds_ * 1e3},
+                     {"index_ms", index_seconds_ * 1e3},
+                     {"visibility_ms", visibility_seconds_ * 1e3}};
+  }
+
+  bool converged() const override { return deferred_ == 0; }
+
+ private:
+  struct Candidate {
+    double pixels;  // projected size of one of the node's voxels
+    BrickKey key;
+    int32_t handle;  // index into handles_, -1 for none
+    bool operator<(const Candidate& o) const { return pixels < o.pixels; }
+  };
+
+  /// The node's nominal octree box in finest voxel coordinates, clipped to the volume.
+  Box3d voxel_box(const BrickKey& k) const {
+    const double size = double(M_) * double(int64_t(1) << layout_.steps(int(k.level)));
+    Box3d b;
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = double(k.coords()[a]) * size;
+      b.hi[a] = std::min(b.lo[a] + size, double(geo_.dims[a] - 1));
+    }
+    return b;
+  }
+  Box3d world_box(const BrickKey& k) const {
+    const Box3d v = voxel_box(k);
+    return {geo_.to_world(v.lo), geo_.to_world(v.hi)};
+  }
+  double voxel_pixels(const BrickKey& k, const Camera& cam, int height) const {
+    const Box3d box = world_box(k);
+    const Vec3d d = max(max(box.lo - cam.eye, cam.eye - box.hi), Vec3d(0.0));
+    const double voxel = max_component(geo_.spacing) * double(int64_t(1) << layout_.steps(int(k.level)));
+    return cam.projected_pixels(voxel, length(d), height);
+  }
+  bool was_visible(const BrickKey& k) const {
+    if (!p_.visibility) return true;
+    const std::optional<bool> v = ctx_.cache().visibility(k);
+    return !v || *v;
+  }
+
+  /// What a node of the cut is for this frame, when it is a leaf.
+  enum class NodeUse { empty, constant, data };
+  NodeUse use_of(const BrickKey& k, const Camera& cam, int width, int height) const {
+    if (!ctx_.cache().layout().contains(k)) return NodeUse::empty;
+    const NodeRecord& n = ctx_.nodes().at(k);
+    if (!ctx_.node_visible(n)) return NodeUse::empty;
+    if (!cam.may_see(world_box(k), width, height)) return NodeUse::empty;
+    if (scene_.clip && !world_box(k).overlaps({geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi)}))
+      return NodeUse::empty;
+    return n.is_constant() ? NodeUse::constant : NodeUse::data;
+  }
+
+  void add_leaf(const BrickKey& k, NodeUse use, int32_t handle) {
+    uint32_t payload = kEmptyLeaf;
+    if (use == NodeUse::constant) {
+      payload = kConstantLeaf | uint32_t(constants_.size());
+      constants_.push_back(ctx_.nodes().at(k).constant);
+      ++constant_leaves_;
+    } else if (use == NodeUse::data && handle >= 0) {
+      payload = uint32_t(handle);
+      ++data_leaves_;
+    }
+    leaves_.push_back({k, payload});
+  }
+
+  void refine(const FrameSetup& setup) {
+    BrickCache& cache = ctx_.cache();
+    const Camera& cam = setup.camera;
+    for (BrickHandle& h : handles_) h.release();
+    handles_.clear();
+    leaves_.clear();
+    inner_.clear();
+    constants_.clear();
+    data_leaves_ = constant_leaves_ = 0;
+    deferred_ = occluded_ = requests_ = 0;
+    int budget = p_.upload_budget;
+    const uint32_t capacity = cache.pool_slots();
+    uint32_t pinned = 0;
+
+    // Asks for a node's brick: a pinned handle when resident, else a request (budget allowing).
+    auto acquire = [&](const BrickKey& k, double pixels) -> int32_t {
+      BrickHandle h = cache.lookup(k, float(pixels), /*request_on_miss=*/false);
+      if (h.resident()) {
+        handles_.push_back(std::move(h));
+        ++pinned;
+        return int32_t(handles_.size() - 1);
+      }
+      if (budget > 0) {
+        cache.request(k, float(pixels));
+        --budget;
+        ++requests_;
+      }
+      return -1;
+    };
+
+    std::priority_queue<Candidate> queue;
+    const BrickKey root{0, 0, 0, 0};
+    const NodeUse root_use = use_of(root, cam, setup.width, setup.height);
+    if (root_use != NodeUse::data) {
+      add_leaf(root, root_use, -1);
+      return;
+    }
+    const double root_pixels = voxel_pixels(root, cam, setup.height);
+    const int32_t root_handle = acquire(root, root_pixels);
+    if (root_handle < 0) {  // nothing to draw until the root arrives
+      ++deferred_;
+      add_leaf(root, NodeUse::empty, -1);
+      return;
+    }
+    queue.push({root_pixels, root, root_handle});
+    struct Child {
+      BrickKey key;
+      NodeUse use;
+      double pixels;
+      int32_t handle;
+    };
+    std::vector<Child> children;
+    while (!queue.empty()) {
+      const Candidate n = queue.top();
+      queue.pop();
+      const bool wants = int(n.key.level) < layout_.finest() && n.pixels > lod_ratio_;
+      if (!wants) {
+        add_leaf(n.key, NodeUse::data, n.handle);
+        continue;
+      }
+      if (!was_visible(n.key)) {  // occluded in the last query: coarse data is enough
+        ++occluded_;
+        add_leaf(n.key, NodeUse::data, n.handle);
+        continue;
+      }
+      // Refine only when every child that needs data is resident and the pool has room.
+      children.clear();
+      bool ready = true;
+      uint32_t needed = 0;
+      for (int c = 0; c < 8; ++c) {
+        const BrickKey k = n.key.child(c);
+        if (!layout_.contains(k)) continue;  // outside the volume: the index marks it
+        const NodeUse use = use_of(k, cam, setup.width, setup.height);
+        Child child{k, use, 0, -1};
+        if (use == NodeUse::data) {
+          ++needed;
+          child.pixels = voxel_pixels(k, cam, setup.height);
+          if (pinned + needed > capacity + 1) ready = false;  // +1: the parent's slot is given back
+        }
+        children.push_back(child);
+      }
+      if (ready)
+        for (Child& c : children)
+          if (c.use == NodeUse::data) {
+            c.handle = acquire(c.key, c.pixels);
+            ready &= c.handle >= 0;
+          }
+      if (!ready) {
+        ++deferred_;
+        for (Child& c : children)
+          if (c.handle >= 0) {
+            handles_[size_t(c.handle)].release();
+            --pinned;
+          }
+        add_leaf(n.key, NodeUse::data, n.handle);
+        continue;
+      }
+      handles_[size_t(n.handle)].release();
+      --pinned;
+      inner_.push_back(n.key);
+      for (const Child& c : children) {
+        if (c.use == NodeUse::data) queue.push({c.pixels, c.key, c.handle});
+        else add_leaf(c.key, c.use, -1);
+      }
+    }
+    // Data pointers of the leaves, read by the render threads.
+    data_.assign(handles_.size(), nullptr);
+    for (size_t i = 0; i < handles_.size(); ++i)
+      if (handles_[i].resident()) data_[i] = handles_[i].template voxels<Stored>();
+  }
+
+  // --- visibility feedback -----------------------------------------------------------------
+  /// Screen rectangle [x0, x1) x [y0, y1) covering a world box; false when the box reaches
+  /// behind the eye (then it is treated as visible).
+  bool screen_rect(const Camera& cam, const Box3d& box, int w, int h, int r[4]) const {
+    Vec3d f, right, up;
+    cam.basis(f, right, up);
+    const double ty = std::tan(cam.fov_degrees * kPi / 360.0), tx = ty * double(w) / double(h);
+    double x0 = kInf, y0 = kInf, x1 = -kInf, y1 = -kInf;
+    for (int c = 0; c < 8; ++c) {
+      const Vec3d p{c & 1 ? box.hi.x : box.lo.x, c & 2 ? box.hi.y : box.lo.y, c & 4 ? box.hi.z : box.lo.z};
+      const Vec3d v = p - cam.eye;
+      const double z = dot(v, f);
+      if (z <= 1e-9) return false;
+      const double sx = dot(v, right) / (z * tx), sy = dot(v, up) / (z * ty);
+      const double px = (sx + 1) * 0.5 * w, py = (1 - sy) * 0.5 * h;
+      x0 = std::min(x0, px), x1 = std::max(x1, px), y0 = std::min(y0, py), y1 = std::max(y1, py);
+    }
+    r[0] = std::clamp(int(std::floor(x0)), 0, w);
+    r[1] = std::clamp(int(std::floor(y0)), 0, h);
+    r[2] = std::clamp(int(std::ceil(x1)), 0, w);
+    r[3] = std::clamp(int(std::ceil(y1)), 0, h);
+    return true;
+  }
+
+  void query_visibility(const FrameSetup& setup) {
+    BrickCache& cache = ctx_.cache();
+    const Camera& cam = setup.camera;
+    const int w = setup.width, h = setup.height;
+    const int tiles_x = (w + 15) / 16;
+    const int group = int(frame_ % uint64_t(std::max(1, p_.visibility_groups)));
+    queries_ = 0;
+    std::vector<std::pair<BrickKey, bool>> known;  // this frame's verdicts on the cut's leaves
+    for (const auto& leaf : leaves_) {
+      if (leaf.payload == kEmptyLeaf) continue;
+      const Box3d box = world_box(leaf.key);
+      int r[4];
+      bool visible = true;
+      if (screen_rect(cam, box, w, h, r)) {
+        if (r[0] >= r[2] || r[1] >= r[3]) continue;  // off screen: the frustum test decides
+        const int cx = (r[0] + r[2]) / 2, cy = (r[1] + r[3]) / 2;
+        const int tile = (std::min(cx, w - 1) / 16) + (std::min(cy, h - 1) / 16) * tiles_x;
+        if (tile % std::max(1, p_.visibility_groups) != group) continue;  // another frame's query
+        ++queries_;
+        const int64_t area = int64_t(r[2] - r[0]) * int64_t(r[3] - r[1]);
+        const int64_t needed = std::min<int64_t>(p_.visibility_pixels, area);
+        int64_t in_front = 0;
+        for (int y = r[1]; y < r[3] && in_front < needed; ++y)
+          for (int x = r[0]; x < r[2] && in_front < needed; ++x) {
+            const Rayd ray = cam.ray(x + 0.5, y + 0.5, w, h);
+            const Interval<double> span = intersect(ray, box);
+            if (!span.empty() && std::max(span.t0, 0.0) < double(occlusion_(x, y))) ++in_front;
+          }
+        visible = in_front >= needed;
+      }
+      cache.mark_visible(leaf.key, visible);
+      known.emplace_back(leaf.key, visible);
+    }
+    // A parent is visible when any of its children is, by their latest verdicts (this frame's,
+    // or an earlier frame's for leaves another tile group holds; untested counts as visible,
+    // empty leaves as invisible). Deepest first, so inner children are decided before parents.
+    std::unordered_map<uint64_t, bool> verdict;
+    for (const auto& leaf : leaves_)
+      verdict[leaf.key.code()] = leaf.payload != kEmptyLeaf && cache.visibility(leaf.key).value_or(true);
+    for (const auto& [key, visible] : known) verdict[key.code()] = visible;
+    std::sort(inner_.begin(), inner_.end(), [](const BrickKey& a, const BrickKey& b) { return a.level > b.level; });
+    for (const BrickKey& parent : inner_) {
+      bool visible = false;
+      for (int c = 0; c < 8 && !visible; ++c) {
+        const BrickKey child = parent.child(c);
+        if (!layout_.contains(child)) continue;
+        auto it = verdict.find(child.code());
+        visible = it != verdict.end() && it->second;
+      }
+      verdict[parent.code()] = visible;
+      cache.mark_visible(parent, visible);
+    }
+  }
+
+  // --- rays ------------------------------------------------------------------------------
+  struct Tracer {
+    const GobbettiRenderer& r;
+    const FrameSetup& setup;
+    RayCounters& counters;
+    const bool gradients;
+
+    Tracer(const GobbettiRenderer& renderer, const FrameSetup& s, RayCounters& c)
+        : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)) {}
+
+    /// A data leaf's brick, sampled at finest-level voxel coordinates.
+    struct Brick {
+      const Stored* data = nullptr;
+      double inv_scale = 1;  // 1 / 2^steps: finest -> level coordinates
+      Vec3d offset;          // brick origin (with apron) in level coordinates
+      int level = 0;
+
+      void local(const Vec3d& x, int64_t e, int64_t cell[3], double u[3]) const {
+        for (int a = 0; a < 3; ++a) {
+          const double l = std::clamp((x[a] + 0.5) * inv_scale - 0.5 - offset[a], 0.0, double(e - 1));
+          cell[a] = std::min<int64_t>(int64_t(l), e - 2);
+          u[a] = l - double(cell[a]);
+        }
+      }
+      double sample(const Vec3d& x, int64_t e, Vec3d* gradient = nullptr) const {
+        int64_t c[3];
+        double u[3];
+        local(x, e, c, u);
+        const Stored* p = data + (c[2] * e + c[1]) * e + c[0];
+        const int64_t dy = e, dz = e * e;
+        const double v[8] = {double(p[0]), double(p[1]), double(p[dy]), double(p[dy + 1]),
+                             double(p[dz]), double(p[dz + 1]), double(p[dz + dy]), double(p[dz + dy + 1])};
+        if (gradient) *gradient = trilinear_gradient(v, u[0], u[1], u[2]) * inv_scale;
+        return trilinear(v, u[0], u[1], u[2]);
+      }
+    };
+
+    Brick brick_of(const gobbetti::LeafVisit& leaf) const {
+      Brick b;
+      b.data = r.data_[leaf.payload];
+      b.level = int(leaf.key.level);
+      b.inv_scale = 1.0 / double(int64_t(1) << r.layout_.steps(b.level));
+      for (int a = 0; a < 3; ++a) b.offset[a] = double(leaf.key.coords()[a]) * double(r.M_) - double(r.A_);
+      return b;
+    }
+
+    void pixel(int x, int y, FrameBuffers& out) {
+      ++counters.rays;
+      const PrimaryRay ray = primary_ray(setup, r.geo_, x, y);
+      PixelResult px;
+      px.color = r.scene_.background;
+      double occlusion = kInf;
+      if (ray.hits()) {
+        if (r.scene_.mode == RenderMode::iso) iso(ray, px, occlusion);
+        else dvr(ray, px, occlusion);
+      }
+      write_pixel(out, x, y, px);
+      r.occlusion_(x, y) = float(occlusion);
+    }
+
+    Vec3d shade_normal(const Vec3d& gradient_finest, const Vec3d& dir) {
+      ++counters.gradients;
+      return facing_normal(gradient_finest / r.geo_.spacing, dir);
+    }
+
+    void iso(const PrimaryRay& ray, PixelResult& px, double& occlusion) {
+      const auto& surfaces = r.scene_.isosurfaces;
+      const double speed = length(ray.dir);  // finest voxels per unit t
+      double prev_t = 0, prev[4] = {};
+      bool have_prev = false;
+      double t_next = ray.span.t0;
+      double hit_t = kInf;
+      int hit_s = -1;
+      Brick hit_brick;
+      const int64_t e = r.E_;
+      r.index_.traverse(ray.org, ray.dir, ray.span.t0, ray.span.t1, [&](const gobbetti::LeafVisit& leaf) {
+        ++counters.nodes;
+        if (leaf.outside || leaf.payload == kEmptyLeaf) {
+          have_prev = false;
+          t_next = leaf.tb;
+          return true;
+        }
+        if (leaf.payload & kConstantLeaf) {
+          const double c = r.constants_[leaf.payload & ~kConstantLeaf];
+          for (size_t s = 0; s < surfaces.size(); ++s)
+            if (c == surfaces[s].value) {  // a constant region at the isovalue: the surface starts here
+              hit_t = std::max(leaf.ta, ray.span.t0);
+              hit_s = int(s);
+              return false;
+            }
+          have_prev = false;
+          t_next = leaf.tb;
+          return true;
+        }
+        ++counters.bricks;
+        const Brick b = brick_of(leaf);
+        const double dt = r.step_by_level_[size_t(b.level)] / speed;
+        if (!have_prev) t_next = leaf.ta;
+        double t = std::max(t_next, leaf.ta);
+        // Fixed steps inside the leaf, then one sample at its exit, so that a crossing in the
+        // last part-step is bracketed even when the next leaf is empty.
+        for (bool last = false; !last;) {
+          if (t >= leaf.tb) {
+            if (have_prev && prev_t >= leaf.tb - 1e-9 * dt) break;
+            t = leaf.tb;
+            last = true;
+          }
+          ++counters.samples;
+          const double v = b.sample(ray.org + ray.dir * t, e);
+          for (size_t s = 0; s < surfaces.size(); ++s) {
+            const double g = v - surfaces[s].value;
+            if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
+              double lo = prev_t, hi = t, glo = prev[s];
+              for (int it = 0; it < r.p_.refine && g != 0; ++it) {
+                const double mid = 0.5 * (lo + hi);
+                ++counters.samples;
+                const double gm = b.sample(ray.org + ray.dir * mid, e) - surfaces[s].value;
+                if ((gm < 0) == (glo < 0)) lo = mid, glo = gm;
+                else hi = mid;
+              }
+              const double th = g == 0 ? t : 0.5 * (lo + hi);
+              if (th < hit_t) hit_t = th, hit_s = int(s), hit_brick = b;
+            }
+            prev[s] = g;
+          }
+          prev_t = t;
+          have_prev = true;
+          if (hit_s >= 0) return false;
+          t_next = t + dt;
+          t += dt;
+        }
+        return true;
+      });
+      if (hit_s < 0) return;
+      px.depth = occlusion = hit_t;
+      px.alpha = 1;
+      px.color = surfaces[size_t(hit_s)].color;
+      if (!gradients) return;
+      Vec3d g(0.0);
+      if (hit_brick.data) hit_brick.sample(ray.org + ray.dir * hit_t, e, &g);
+      const Vec3d n = shade_normal(g, ray.world.dir);
+      if (setup.outputs.normals) px.normal = n;
+      if (!r.shading_.lit()) return;
+      double light_distance;
+      const Vec3d l = r.shading_.to_light(ray.world.at(hit_t), setup.camera.eye, light_distance);
+      px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
+    }
+
+    void dvr(const PrimaryRay& ray, PixelResult& px, double& occlusion) {
+      const double speed = length(ray.dir);
+      const double stop = r.scene_.quality.termination_opacity;
+      const bool lit = r.shading_.lit();
+      Vec3d accum(0.0);
+      double a_acc = 0;
+      double t_next = ray.span.t0;
+      const int64_t e = r.E_;
+      auto composite = [&](Vec3f c, double a, double t, const Vec3d& gradient) {
+        Vec3d n(0.0);
+        if (gradients) n = shade_normal(gradient, ray.world.dir);
+        if (lit) {
+          double light_distance;
+          c = r.shading_.shade(c, n, -ray.world.dir, r.shading_.to_light(ray.world.at(t), setup.camera.eye, light_distance), false);
+        }
+        accum += Vec3d(c) * ((1 - a_acc) * a);
+        a_acc += (1 - a_acc) * a;
+        if (px.depth == kInf && a_acc >= 0.5) {
+          px.depth = t;
+          if (setup.outputs.normals) px.normal = n;
+        }
+      };
+      r.index_.traverse(ray.org, ray.dir, ray.span.t0, ray.span.t1, [&](const gobbetti::LeafVisit& leaf) {
+        ++counters.nodes;
+        if (leaf.outside || leaf.payload == kEmptyLeaf) {
+          t_next = std::max(t_next, leaf.tb);
+          return true;
+        }
+        if (leaf.payload & kConstantLeaf) {
+          // A constant region: its emission-absorption integral in closed form.
+          Vec3f c;
+          float a;
+          r.scene_.transfer_function.eval(r.constants_[leaf.payload & ~kConstantLeaf], c, a);
+          const double length_voxels = (leaf.tb - std::max(leaf.ta, t_next)) * speed;
+          if (a > 0 && length_voxels > 0) composite(c, 1 - std::pow(1 - double(a), length_voxels), std::max(leaf.ta, t_next), Vec3d(0.0));
+          t_next = std::max(t_next, leaf.tb);
+          if (a_acc >= stop) occlusion = leaf.tb;
+          return a_acc < stop;
+        }
+        ++counters.bricks;
+        const Brick b = brick_of(leaf);
+        const TfTable& tf = r.tf_by_level_[size_t(b.level)];
+        const double dt = r.step_by_level_[size_t(b.level)] / speed;
+        double t = std::max(t_next, leaf.ta);
+        for (; t <= leaf.tb; t += dt) {
+          ++counters.samples;
+          Vec3d g(0.0);
+          const double v = b.sample(ray.org + ray.dir * t, e, gradients ? &g : nullptr);
+          Vec3f c;
+          float a;
+          tf.lookup(float(v), c, a);
+          if (a > 0) composite(c, a, t, g);
+          if (a_acc >= stop) {
+            occlusion = t;
+            return false;
+          }
+        }
+        t_next = t;
+        return true;
+      });
+      px.color = Vec3f(accum + Vec3d(r.scene_.background) * (1 - a_acc));
+      px.alpha = float(a_acc);
+    }
+  };
+
+  const RenderContext& ctx_;
+  const Scene& scene_;
+  const VolumeGeometry& geo_;
+  const StoreLayout& layout_;
+  GobbettiParams p_;
+  ShadingModel shading_;
+  double lod_ratio_ = 1;
+  int64_t M_ = 32, A_ = 1, E_ = 34;
+  std::vector<double> step_by_level_;   // sampling step per level, finest voxels
+  std::vector<TfTable> tf_by_level_;    // the 2D transfer-function table: opacity corrected per level
+
+  // This frame's cut, written by begin_frame(), read by the render threads.
+  uint64_t frame_ = 0;
+  std::vector<BrickHandle> handles_;
+  std::vector<const Stored*> data_;
+  std::vector<float> constants_;
+  std::vector<gobbetti::CutLeaf> leaves_;
+  std::vector<BrickKey> inner_;  // the cut's refined nodes, for visibility propagation
+  gobbetti::SpatialIndex index_;
+  mutable FloatImage occlusion_;  // where each ray became opaque; pixels are written by one tile each
+  uint64_t data_leaves_ = 0, constant_leaves_ = 0, deferred_ = 0, occluded_ = 0, requests_ = 0, queries_ = 0;
+  double refine_seconds_ = 0, index_seconds_ = 0, visibility_seconds_ = 0;
+};
+
+}  // namespace
+
+BackendEntry gobbetti_backend() {
+  BackendEntry e;
+  e.info.name = "gobbetti";
+  e.info.description = "Gobbetti et al. 2008: adaptive out-of-core refinement of the brick octree, per-frame spatial "
+                       "index with neighbour links, stackless traversal, visibility feedback";
+  e.info.kinds = {DataKind::structured};
+  e.info.modes = {RenderMode::iso, RenderMode::dvr};
+  e.info.params = {
+      {"lod_ratio", 0, 0, 1000, "target pixels per voxel; 0: the scene's quality.lod_ratio"},
+      {"step", 0.5, 1e-3, 16, "sampling step in voxels of each leaf's level (times quality.step_factor; DVR: / sampling_rate)"},
+      {"upload_budget", 256, 1, 1e6, "new brick requests per frame"},
+      {"visibility", 1, 0, 1, "1: visibility feedback (occluded nodes are not refined)"},
+      {"visibility_pixels", 4, 1, 1e6, "pixels in front of the depth buffer that make a node visible"},
+      {"visibility_groups", 4, 1, 64, "screen-tile groups: each frame queries one, all nodes within this many frames"},
+      {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
+  };
+  e.info.quality_param = "lod_ratio";
+  e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
+  e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
+    if (ctx.scene().shading.casts_shadows())
+      throw Error(Errc::unsupported, "gobbetti casts no shadow rays").with_file(ctx.scene().file).with_field("shading.shadows");
+    GobbettiParams gp;
+    gp.lod_ratio = p["lod_ratio"];
+    gp.step = p["step"];
+    gp.upload_budget = int(p["upload_budget"]);
+    gp.visibility = p["visibility"] != 0;
+    gp.visibility_pixels = int(p["visibility_pixels"]);
+    gp.visibility_groups = int(p["visibility_groups"]);
+    gp.refine = int(p["refine"]);
+    return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
+      return std::make_unique<GobbettiRenderer<decltype(stored)>>(ctx, gp);
+    });
+  };
+  return e;
+}
+
+}  // namespace brickyard

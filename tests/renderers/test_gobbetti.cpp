@@ -1,0 +1,183 @@
+// The `gobbetti` back end as a renderer: it converges to the reference with an ample pool,
+// degrades to coarser levels without holes when the pool is too small, never holds more data
+// than the pool, and its visibility feedback never culls what the image shows.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include <tbb/global_control.h>
+
+#include "preprocess/builder.h"
+#include "preprocess/volume_source.h"
+#include "renderers/common/metrics.h"
+#include "renderers/common/render.h"
+#include "renderers/common/scene.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+/// Marschner-Lobb 64^3 f32 in 8^3 bricks (4 levels): detail everywhere, no constant bricks.
+class Gobbetti : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    BuildOptions o;
+    o.brick_size = 8;
+    auto ml = make_field_source(make_field("marschner-lobb"), {64, 64, 64}, ValueType::f32);
+    build_store(*ml, dir_->file("ml.store"), o);
+    auto sphere = make_field_source(make_field("sphere"), {64, 64, 64}, ValueType::f32);
+    build_store(*sphere, dir_->file("sphere.store"), o);
+  }
+  static void TearDownTestSuite() { delete dir_; }
+
+  static Scene scene(const std::string& extra, int size = 64, const std::string& l1 = "64MiB",
+                     const std::string& store = "ml.store") {
+    const std::string text = R"({"dataset": ")" + store + R"(", "image": {"width": )" + std::to_string(size) + R"(, "height": )" +
+                             std::to_string(size) + R"(}, "cache": {"l1": ")" + l1 + R"(", "l2": "64MiB"},
+        "camera": {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45], "fov_degrees": 35}, )" + extra + "}";
+    return parse_scene(text, dir_->file("scene.json"));
+  }
+  static const std::string& iso() {
+    static const std::string s = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})";
+    return s;
+  }
+  static const std::string& dvr() {
+    static const std::string s = R"("mode": "dvr", "transfer_function": {"points": [
+        {"value": 0.55, "color": [0.2, 0.4, 0.9], "opacity": 0}, {"value": 0.8, "color": [0.9, 0.8, 0.3], "opacity": 0.3},
+        {"value": 1.0, "color": [1, 0.4, 0.2], "opacity": 0.6}]})";
+    return s;
+  }
+
+  static RenderSession::Options backend(const std::string& name, std::map<std::string, double> params = {}) {
+    RenderSession::Options o;
+    o.backend = name;
+    o.params = std::move(params);
+    return o;
+  }
+
+  static bool finite(const FrameBuffers& fb) {
+    for (size_t i = 0; i < fb.color.size(); ++i) {
+      const Rgbaf c = fb.color.data()[i];
+      if (!std::isfinite(c.r) || !std::isfinite(c.g) || !std::isfinite(c.b) || !std::isfinite(c.a)) return false;
+    }
+    return true;
+  }
+
+  static testing::TempDir* dir_;
+};
+testing::TempDir* Gobbetti::dir_ = nullptr;
+
+const FrameOutputs kAll{.depth = true, .normals = true};
+
+TEST_F(Gobbetti, FirstFrameRequestsTheRootAndConvergesOverFrames) {
+  RenderSession s(scene(iso()), backend("gobbetti"));
+  FrameBuffers fb;
+  s.render(0, fb, kAll);
+  EXPECT_FALSE(s.converged());  // the root was not resident: requested, nothing drawn yet
+  const int frames = s.settle(0, kAll, 200);
+  EXPECT_LT(frames, 200);
+  EXPECT_TRUE(s.converged());
+}
+
+TEST_F(Gobbetti, WithAnAmplePoolAndASettledCameraMatchesTheReference) {
+  // At lod_ratio 0.25 every leaf on screen is at the finest level, so what remains is the
+  // sampling error of fixed steps: as small as the baseline's at the same step, and small.
+  for (const std::string& mode : {iso(), dvr()}) {
+    const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.25})", 96);
+    RenderSession ref(sc, backend("reference"));
+    FrameBuffers truth, fb, baseline;
+    ref.render(0, truth, kAll);
+    const double voxel = ref.context().geometry().voxel_size;
+    RenderSession g(sc, backend("gobbetti", {{"step", 0.03125}, {"refine", 20}}));
+    g.settle(0, kAll);
+    const FrameStats st = g.render(0, fb, kAll);
+    ASSERT_TRUE(finite(fb));
+    RenderSession rm(sc, backend("raymarch", {{"step", 0.03125}, {"refine", 20}}));
+    rm.render(0, baseline, kAll);
+    const ImageError e = compare_frames(fb, truth, voxel);
+    const ImageError b = compare_frames(baseline, truth, voxel);
+    EXPECT_LT(e.rmse, 0.015) << e.to_json();
+    EXPECT_LE(e.rmse, 1.2 * b.rmse + 1e-3) << e.to_json() << b.to_json();
+    EXPECT_LT(e.coverage_mismatch_fraction, 0.005) << e.to_json();
+    if (sc.mode == RenderMode::iso) {
+      EXPECT_LT(e.depth_p99, 0.05) << e.to_json();
+      EXPECT_LT(e.normal_mean_deg, 2.0) << e.to_json();
+    }
+    EXPECT_GT(st.backend_value("working_set"), 0);
+  }
+}
+
+TEST_F(Gobbetti, WorkingSetNeverExceedsThePoolAndASmallPoolDegradesWithoutHoles) {
+  // A sphere (its coarse levels keep its shape) at full resolution, then with a pool of 12
+  // slots of 10^3 f32 voxels (8^3 bricks with apron): far fewer than the finest cut needs.
+  const std::string sphere_iso = R"("mode": "iso", "isosurfaces": [{"value": 0.0}], "quality": {"lod_ratio": 0.25})";
+  RenderSession ample(scene(sphere_iso, 64, "64MiB", "sphere.store"), backend("gobbetti"));
+  ample.settle(0, kAll);
+  FrameBuffers fine;
+  const FrameStats fine_stats = ample.render(0, fine, kAll);
+  RenderSession tight(scene(sphere_iso, 64, "48000", "sphere.store"), backend("gobbetti"));
+  ASSERT_LT(tight.cache().pool_slots(), fine_stats.backend_value("working_set"));
+  FrameBuffers coarse;
+  for (int f = 0; f < 30; ++f) {
+    const FrameStats st = tight.render(0, coarse, kAll);
+    tight.cache().wait_idle();
+    EXPECT_LE(st.backend_value("working_set"), double(tight.cache().pool_slots()));
+    ASSERT_TRUE(finite(coarse));
+  }
+  // Coarser, but no holes: wherever the full-resolution image shows the surface, so does the
+  // coarse one (at a slightly different depth), and nearly nowhere else.
+  int fine_hits = 0, holes = 0, extra = 0;
+  for (int y = 0; y < fine.height(); ++y)
+    for (int x = 0; x < fine.width(); ++x) {
+      const bool f = std::isfinite(fine.depth(x, y)), c = std::isfinite(coarse.depth(x, y));
+      fine_hits += f;
+      holes += f && !c;
+      extra += c && !f;
+    }
+  ASSERT_GT(fine_hits, 500);
+  EXPECT_LT(double(holes), 0.02 * fine_hits) << holes << " of " << fine_hits;
+  EXPECT_LT(double(extra), 0.02 * fine_hits) << extra << " of " << fine_hits;
+}
+
+TEST_F(Gobbetti, VisibilityFeedbackNeverCullsWhatTheImageShows) {
+  for (const std::string& mode : {iso(), dvr()}) {
+    const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.5})", 96);
+    RenderSession on(sc, backend("gobbetti", {{"visibility", 1}}));
+    RenderSession off(sc, backend("gobbetti", {{"visibility", 0}}));
+    on.settle(0, kAll);
+    off.settle(0, kAll);
+    // Let every tile group be queried, then settle again.
+    for (int f = 0; f < 8; ++f) {
+      FrameBuffers scratch;
+      on.render(0, scratch, kAll);
+      on.cache().wait_idle();
+    }
+    on.settle(0, kAll);
+    FrameBuffers a, b;
+    const FrameStats sa = on.render(0, a, kAll);
+    const FrameStats sb = off.render(0, b, kAll);
+    EXPECT_LE(sa.backend_value("working_set"), sb.backend_value("working_set"));
+    const ImageError e = compare_frames(a, b, 1.0);
+    EXPECT_LT(e.rmse, 0.01) << e.to_json();
+    EXPECT_LT(e.coverage_mismatch_fraction, 0.002) << e.to_json();
+  }
+}
+
+TEST_F(Gobbetti, TheImageDoesNotDependOnTheThreadCount) {
+  const Scene sc = scene(dvr());
+  RenderSession s(sc, backend("gobbetti", {{"visibility", 0}}));
+  s.settle(0, kAll);
+  FrameBuffers one, two;
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    s.render(0, one, kAll);
+  }
+  s.render(0, two, kAll);
+  EXPECT_TRUE(one.color == two.color);
+}
+
+}  // namespace
+}  // namespace brickyard
