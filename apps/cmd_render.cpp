@@ -25,7 +25,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-/// "all", "N", "A-B" (inclusive) -> frame numbers within [0, count).
+/// "all", or a comma-separated list of N and A-B (inclusive) -> frame numbers within
+/// [0, count), in the order given ("0,90,10-12": a jump, then three frames).
 std::vector<int> parse_frames(const std::string& text, int count) {
   std::vector<int> out;
   if (text.empty()) return {0};
@@ -33,13 +34,20 @@ std::vector<int> parse_frames(const std::string& text, int count) {
     for (int f = 0; f < count; ++f) out.push_back(f);
     return out;
   }
-  const size_t dash = text.find('-');
-  const auto ints = parse_int_list(dash == std::string::npos ? text : text.substr(0, dash) + "," + text.substr(dash + 1),
-                                   dash == std::string::npos ? 1 : 2, "--frames");
-  const int64_t a = ints[0], b = ints.size() > 1 ? ints[1] : ints[0];
-  if (a < 0 || b < a || b >= count)
-    throw Error(Errc::invalid_argument, fmt::format("'{}' is outside the scene's frames 0-{}", text, count - 1)).with_field("--frames");
-  for (int64_t f = a; f <= b; ++f) out.push_back(int(f));
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t comma = text.find(',', start);
+    const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    const size_t dash = item.find('-');
+    const auto ints = parse_int_list(dash == std::string::npos ? item : item.substr(0, dash) + "," + item.substr(dash + 1),
+                                     dash == std::string::npos ? 1 : 2, "--frames");
+    const int64_t a = ints[0], b = ints.size() > 1 ? ints[1] : ints[0];
+    if (a < 0 || b < a || b >= count)
+      throw Error(Errc::invalid_argument, fmt::format("'{}' is outside the scene's frames 0-{}", item, count - 1)).with_field("--frames");
+    for (int64_t f = a; f <= b; ++f) out.push_back(int(f));
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
   return out;
 }
 
@@ -60,6 +68,9 @@ std::map<std::string, double> parse_sets(const std::vector<std::string>& sets, c
 }
 
 void write_text(const std::string& path, const std::string& text) { write_file_atomically(path, text); }
+
+double median_of(std::vector<double> v);
+double p95_of(std::vector<double> v);
 
 struct RenderOptions {
   std::string dataset;
@@ -98,6 +109,8 @@ void run_render(const RenderOptions& o) {
   opts.params = parse_sets(o.sets, "--set");
   RenderSession session(scene, opts);
   const std::vector<int> frames = parse_frames(o.frames, scene.frames());
+  for (const std::string* path : {&o.out, &o.depth, &o.normals, &o.stats})
+    if (!path->empty() && fs::path(*path).has_parent_path()) fs::create_directories(fs::path(*path).parent_path());
   const bool several = frames.size() > 1 || scene.has_path;  // path frames are always numbered
   FrameOutputs outputs;
   outputs.depth = true;
@@ -139,6 +152,28 @@ void run_render(const RenderOptions& o) {
                              format_count(stats.seconds > 0 ? double(stats.counters.rays) / stats.seconds : 0),
                              stats.threads, format_count(double(stats.counters.samples)),
                              format_count(double(stats.counters.bricks)), stats.requests, error_line);
+  }
+  if (frames.size() > 1) {
+    // A flight's summary: frame time, and the back end's own figures averaged over frames.
+    std::vector<double> seconds;
+    double bytes = 0, settle = 0;
+    std::map<std::string, double> sums;
+    for (const auto& j : all) {
+      seconds.push_back(j["seconds"].get<double>());
+      bytes += j["cache"]["bytes_read"].get<double>();
+      settle += j["settle_frames"].get<double>();
+      for (auto it = j["backend"].begin(); it != j["backend"].end(); ++it) sums[it.key()] += it->get<double>();
+    }
+    const double n = double(all.size());
+    std::cout << fmt::format("{} frames: median {}, p95 {}, {} read per frame", all.size(), format_duration(median_of(seconds)),
+                             format_duration(p95_of(seconds)), format_bytes(bytes / n));
+    if (settle > 0) std::cout << fmt::format(", {:.1f} frames to converge per frame", settle / n);
+    std::cout << "\n";
+    if (!sums.empty()) {
+      std::string line;
+      for (const auto& [name, sum] : sums) line += fmt::format("{}{} {:.4g}", line.empty() ? "" : ", ", name, sum / n);
+      std::cout << "  mean " << line << "\n";
+    }
   }
   if (!o.stats.empty()) {
     nlohmann::json j;
@@ -350,7 +385,7 @@ void add_render_commands(CLI::App& app) {
     cmd->add_option("--depth", o->depth, "Depth PNG (near bright, far dark, misses black)");
     cmd->add_option("--normals", o->normals, "Normal PNG ((n + 1) / 2 as RGB)");
     cmd->add_option("--stats", o->stats, "Frame statistics and cache statistics as JSON");
-    cmd->add_option("--frames", o->frames, "Frames of a camera path: N, A-B or all (default 0)");
+    cmd->add_option("--frames", o->frames, "Frames of a camera path: all, or a list of N and A-B such as 0,90,10-20 (default 0)");
     cmd->add_option("--backend", o->backend, "Back end to use instead of the scene's");
     cmd->add_option("--dataset", o->dataset, "Store to render instead of the scene's dataset");
     cmd->add_option("--set", o->sets, "Back-end parameter NAME=VALUE (repeatable)");
