@@ -378,39 +378,52 @@ class GobbettiRenderer final : public Renderer {
     Tracer(const GobbettiRenderer& renderer, const FrameSetup& s, RayCounters& c)
         : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
-    /// A data leaf's brick, sampled at finest-level voxel coordinates.
+    /// A data leaf's brick as the ray sees it: the ray in the brick's local coordinates
+    /// (level voxels, apron included), l(t) = lo + ld t, sampled in single precision with the
+    /// last cell's corners kept (coherent steps usually stay in a cell).
     struct Brick {
       const Stored* data = nullptr;
-      double inv_scale = 1;  // 1 / 2^steps: finest -> level coordinates
-      Vec3d offset;          // brick origin (with apron) in level coordinates
       int level = 0;
+      int64_t e = 0;
+      float inv_scale = 1;  // 1 / 2^steps: finest -> level voxels
+      float lo[3] = {}, ld[3] = {};
+      mutable int64_t cached = -1;
+      mutable float c[8] = {};
 
-      void local(const Vec3d& x, int64_t e, int64_t cell[3], double u[3]) const {
+      float sample(double t, Vec3d* gradient = nullptr) const {
+        int64_t cell[3];
+        float u[3];
+        const float top = float(e - 1);
         for (int a = 0; a < 3; ++a) {
-          const double l = std::clamp((x[a] + 0.5) * inv_scale - 0.5 - offset[a], 0.0, double(e - 1));
+          const float l = std::clamp(lo[a] + ld[a] * float(t), 0.0f, top);
           cell[a] = std::min<int64_t>(int64_t(l), e - 2);
-          u[a] = l - double(cell[a]);
+          u[a] = l - float(cell[a]);
         }
-      }
-      double sample(const Vec3d& x, int64_t e, Vec3d* gradient = nullptr) const {
-        int64_t c[3];
-        double u[3];
-        local(x, e, c, u);
-        const Stored* p = data + (c[2] * e + c[1]) * e + c[0];
-        const int64_t dy = e, dz = e * e;
-        const double v[8] = {double(p[0]), double(p[1]), double(p[dy]), double(p[dy + 1]),
-                             double(p[dz]), double(p[dz + 1]), double(p[dz + dy]), double(p[dz + dy + 1])};
-        if (gradient) *gradient = trilinear_gradient(v, u[0], u[1], u[2]) * inv_scale;
-        return trilinear(v, u[0], u[1], u[2]);
+        const int64_t index = (cell[2] * e + cell[1]) * e + cell[0];
+        if (index != cached) {
+          const Stored* p = data + index;
+          const int64_t dy = e, dz = e * e;
+          c[0] = float(p[0]), c[1] = float(p[1]), c[2] = float(p[dy]), c[3] = float(p[dy + 1]);
+          c[4] = float(p[dz]), c[5] = float(p[dz + 1]), c[6] = float(p[dz + dy]), c[7] = float(p[dz + dy + 1]);
+          cached = index;
+        }
+        if (gradient) *gradient = Vec3d(trilinear_gradient(c, u[0], u[1], u[2])) * double(inv_scale);
+        return trilinear(c, u[0], u[1], u[2]);
       }
     };
 
-    Brick brick_of(const gobbetti::LeafVisit& leaf) const {
+    Brick brick_of(const gobbetti::LeafVisit& leaf, const PrimaryRay& ray) const {
       Brick b;
       b.data = r.data_[leaf.payload];
       b.level = int(leaf.key.level);
-      b.inv_scale = 1.0 / double(int64_t(1) << r.layout_.steps(b.level));
-      for (int a = 0; a < 3; ++a) b.offset[a] = double(leaf.key.coords()[a]) * double(r.M_) - double(r.A_);
+      b.e = r.E_;
+      const double inv_scale = 1.0 / double(int64_t(1) << r.layout_.steps(b.level));
+      b.inv_scale = float(inv_scale);
+      for (int a = 0; a < 3; ++a) {
+        const double offset = double(leaf.key.coords()[a]) * double(r.M_) - double(r.A_);
+        b.lo[a] = float((ray.org[a] + 0.5) * inv_scale - 0.5 - offset);
+        b.ld[a] = float(ray.dir[a] * inv_scale);
+      }
       return b;
     }
 
@@ -442,7 +455,6 @@ class GobbettiRenderer final : public Renderer {
       double hit_t = kInf;
       int hit_s = -1;
       Brick hit_brick;
-      const int64_t e = r.E_;
       r.index_.traverse(ray.org, ray.dir, ray.span.t0, ray.span.t1, [&](const gobbetti::LeafVisit& leaf) {
         ++counters.nodes;
         if (leaf.outside || leaf.payload == kEmptyLeaf) {
@@ -463,7 +475,7 @@ class GobbettiRenderer final : public Renderer {
           return true;
         }
         ++counters.bricks;
-        const Brick b = brick_of(leaf);
+        const Brick b = brick_of(leaf, ray);
         const double dt = r.step_by_level_[size_t(b.level)] / speed;
         if (!have_prev) t_next = leaf.ta;
         double t = std::max(t_next, leaf.ta);
@@ -476,7 +488,7 @@ class GobbettiRenderer final : public Renderer {
             last = true;
           }
           ++counters.samples;
-          const double v = b.sample(ray.org + ray.dir * t, e);
+          const double v = b.sample(t);
           for (size_t s = 0; s < surfaces.size(); ++s) {
             const double g = v - surfaces[s].value;
             if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
@@ -484,7 +496,7 @@ class GobbettiRenderer final : public Renderer {
               for (int it = 0; it < r.p_.refine && g != 0; ++it) {
                 const double mid = 0.5 * (lo + hi);
                 ++counters.samples;
-                const double gm = b.sample(ray.org + ray.dir * mid, e) - surfaces[s].value;
+                const double gm = b.sample(mid) - surfaces[s].value;
                 if ((gm < 0) == (glo < 0)) lo = mid, glo = gm;
                 else hi = mid;
               }
@@ -507,7 +519,7 @@ class GobbettiRenderer final : public Renderer {
       px.color = surfaces[size_t(hit_s)].color;
       if (!gradients) return;
       Vec3d g(0.0);
-      if (hit_brick.data) hit_brick.sample(ray.org + ray.dir * hit_t, e, &g);
+      if (hit_brick.data) hit_brick.sample(hit_t, &g);
       const Vec3d n = shade_normal(g, ray.world.dir);
       if (setup.outputs.normals) px.normal = n;
       if (!r.shading_.lit()) return;
@@ -523,7 +535,6 @@ class GobbettiRenderer final : public Renderer {
       Vec3d accum(0.0);
       double a_acc = 0;
       double t_next = ray.span.t0;
-      const int64_t e = r.E_;
       auto composite = [&](Vec3f c, double a, double t, const Vec3d& gradient) {
         Vec3d n(0.0);
         if (gradients) n = shade_normal(gradient, ray.world.dir);
@@ -556,14 +567,14 @@ class GobbettiRenderer final : public Renderer {
           return a_acc < stop;
         }
         ++counters.bricks;
-        const Brick b = brick_of(leaf);
+        const Brick b = brick_of(leaf, ray);
         const TfTable& tf = r.tf_by_level_[size_t(b.level)];
         const double dt = r.step_by_level_[size_t(b.level)] / speed;
         double t = std::max(t_next, leaf.ta);
         for (; t <= leaf.tb; t += dt) {
           ++counters.samples;
           Vec3d g(0.0);
-          const double v = b.sample(ray.org + ray.dir * t, e, gradients ? &g : nullptr);
+          const double v = b.sample(t, gradients ? &g : nullptr);
           Vec3f c;
           float a;
           tf.lookup(float(v), c, a);
