@@ -111,6 +111,7 @@ class GobbettiRenderer final : public Renderer {
                      {"index_nodes", double(index_.node_count())},
                      {"deferred_refinements", double(deferred_)},
                      {"occluded_not_refined", double(occluded_)},
+                     {"pool_full_not_refined", double(pool_full_)},
                      {"requests_posted", double(requests_)},
                      {"visibility_queries", double(queries_)},
                      {"refine_ms", refine_seconds_ * 1e3},
@@ -188,9 +189,11 @@ class GobbettiRenderer final : public Renderer {
     inner_.clear();
     constants_.clear();
     data_leaves_ = constant_leaves_ = 0;
-    deferred_ = occluded_ = requests_ = 0;
+    deferred_ = occluded_ = requests_ = pool_full_ = 0;
     int budget = p_.upload_budget;
-    const uint32_t capacity = cache.pool_slots();
+    // The cut keeps an eighth of the pool free: room for the loader's uploads and for the
+    // uneven fill of the pool's shards, so that a full cut still lets new bricks in.
+    const uint32_t capacity = cache.pool_slots() - cache.pool_slots() / 8;
     uint32_t pinned = 0;
 
     // Asks for a node's brick: a pinned handle when resident, else a request (budget allowing).
@@ -256,9 +259,13 @@ class GobbettiRenderer final : public Renderer {
         if (use == NodeUse::data) {
           ++needed;
           child.pixels = voxel_pixels(k, cam, setup.height);
-          if (pinned + needed > capacity + 1) ready = false;  // +1: the parent's slot is given back
         }
         children.push_back(child);
+      }
+      if (pinned + needed > capacity + 1) {  // +1: the parent's slot is given back
+        ++pool_full_;  // no room: adequate as far as this pool goes (not waiting for anything)
+        add_leaf(n.key, NodeUse::data, n.handle);
+        continue;
       }
       if (ready)
         for (Child& c : children)
@@ -612,7 +619,7 @@ class GobbettiRenderer final : public Renderer {
   std::vector<BrickKey> inner_;  // the cut's refined nodes, for visibility propagation
   gobbetti::SpatialIndex index_;
   mutable FloatImage occlusion_;  // where each ray became opaque; pixels are written by one tile each
-  uint64_t data_leaves_ = 0, constant_leaves_ = 0, deferred_ = 0, occluded_ = 0, requests_ = 0, queries_ = 0;
+  uint64_t data_leaves_ = 0, constant_leaves_ = 0, deferred_ = 0, occluded_ = 0, requests_ = 0, queries_ = 0, pool_full_ = 0;
   double refine_seconds_ = 0, index_seconds_ = 0, visibility_seconds_ = 0;
 };
 
