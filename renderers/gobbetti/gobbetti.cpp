@@ -19,6 +19,7 @@
 // through the cache's visibility feedback.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -96,8 +97,8 @@ class GobbettiRenderer final : public Renderer {
     Stopwatch watch;
     if (p_.visibility) query_visibility(setup);
     visibility_seconds_ = watch.seconds();
-    // The pins of this frame's cut end with the frame (the next cut pins again).
-    for (BrickHandle& h : handles_) h.release();
+    // The cut stays pinned until the next one is built: uploads between frames go to the
+    // slots it does not use, never evicting the working set or the top of the tree.
   }
 
   void add_statistics(FrameStats& stats) const override {
@@ -119,7 +120,7 @@ class GobbettiRenderer final : public Renderer {
                      {"visibility_ms", visibility_seconds_ * 1e3}};
   }
 
-  bool converged() const override { return deferred_ == 0; }
+  bool converged() const override { return deferred_ == 0 || stalled_frames_ >= 3; }
 
  private:
   struct Candidate {
@@ -183,7 +184,8 @@ class GobbettiRenderer final : public Renderer {
   void refine(const FrameSetup& setup) {
     BrickCache& cache = ctx_.cache();
     const Camera& cam = setup.camera;
-    for (BrickHandle& h : handles_) h.release();
+    // The previous cut stays pinned while this one is built (see end_frame()).
+    std::vector<BrickHandle> previous = std::move(handles_);
     handles_.clear();
     leaves_.clear();
     inner_.clear();
@@ -191,9 +193,9 @@ class GobbettiRenderer final : public Renderer {
     data_leaves_ = constant_leaves_ = 0;
     deferred_ = occluded_ = requests_ = pool_full_ = 0;
     int budget = p_.upload_budget;
-    // The cut keeps an eighth of the pool free: room for the loader's uploads and for the
+    // The cut keeps a quarter of the pool free: room for the loader's uploads and for the
     // uneven fill of the pool's shards, so that a full cut still lets new bricks in.
-    const uint32_t capacity = cache.pool_slots() - cache.pool_slots() / 8;
+    const uint32_t capacity = cache.pool_slots() - cache.pool_slots() / 4;
     uint32_t pinned = 0;
 
     // Asks for a node's brick: a pinned handle when resident, else a request (budget allowing).
@@ -204,7 +206,9 @@ class GobbettiRenderer final : public Renderer {
         ++pinned;
         return int32_t(handles_.size() - 1);
       }
-      if (budget > 0) {
+      // The bricks pinned plus those asked for must fit the pool, or uploads would evict the cut
+      // itself (root first: it is looked up first, so it is the least recently used).
+      if (budget > 0 && pinned + requests_ < capacity) {
         cache.request(k, float(pixels));
         --budget;
         ++requests_;
@@ -262,7 +266,7 @@ class GobbettiRenderer final : public Renderer {
         }
         children.push_back(child);
       }
-      if (pinned + needed > capacity + 1) {  // +1: the parent's slot is given back
+      if (pinned + needed > capacity) {
         ++pool_full_;  // no room: adequate as far as this pool goes (not waiting for anything)
         add_leaf(n.key, NodeUse::data, n.handle);
         continue;
@@ -283,14 +287,22 @@ class GobbettiRenderer final : public Renderer {
         add_leaf(n.key, NodeUse::data, n.handle);
         continue;
       }
-      handles_[size_t(n.handle)].release();
-      --pinned;
-      inner_.push_back(n.key);
+      inner_.push_back(n.key);  // stays pinned: next frame's refinement starts from it
       for (const Child& c : children) {
         if (c.use == NodeUse::data) queue.push({c.pixels, c.key, c.handle});
         else add_leaf(c.key, c.use, -1);
       }
     }
+    // Usage feedback (protects the cut under lru-frame), then the previous cut's pins go.
+    for (const BrickKey& k : inner_) cache.mark_used(k);
+    for (const auto& leaf : leaves_)
+      if (leaf.payload != kEmptyLeaf && !(leaf.payload & kConstantLeaf)) cache.mark_used(leaf.key);
+    for (BrickHandle& h : previous) h.release();
+    // A cut that stays the same while it waits is stalled (the pool cannot take what it asks
+    // for): as converged as this pool allows.
+    const std::array<uint64_t, 3> signature{leaves_.size(), data_leaves_, deferred_};
+    stalled_frames_ = signature == last_signature_ ? stalled_frames_ + 1 : 0;
+    last_signature_ = signature;
     // Data pointers of the leaves, read by the render threads.
     data_.assign(handles_.size(), nullptr);
     for (size_t i = 0; i < handles_.size(); ++i)
@@ -621,6 +633,8 @@ class GobbettiRenderer final : public Renderer {
   mutable FloatImage occlusion_;  // where each ray became opaque; pixels are written by one tile each
   uint64_t data_leaves_ = 0, constant_leaves_ = 0, deferred_ = 0, occluded_ = 0, requests_ = 0, queries_ = 0, pool_full_ = 0;
   double refine_seconds_ = 0, index_seconds_ = 0, visibility_seconds_ = 0;
+  std::array<uint64_t, 3> last_signature_{};
+  int stalled_frames_ = 0;
 };
 
 }  // namespace
