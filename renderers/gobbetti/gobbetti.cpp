@@ -19,7 +19,6 @@
 // through the cache's visibility feedback.
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -206,9 +205,9 @@ class GobbettiRenderer final : public Renderer {
         ++pinned;
         return int32_t(handles_.size() - 1);
       }
-      // The bricks pinned plus those asked for must fit the pool, or uploads would evict the cut
-      // itself (root first: it is looked up first, so it is the least recently used).
-      if (budget > 0 && pinned + requests_ < capacity) {
+      // The bricks pinned (by this cut, and by the last one, which the uploads must leave alone)
+      // plus those asked for must fit the pool, or uploads would fail for want of a free slot.
+      if (budget > 0 && pinned + requests_ < capacity && last_pinned_ + requests_ < capacity) {
         cache.request(k, float(pixels));
         --budget;
         ++requests_;
@@ -298,11 +297,12 @@ class GobbettiRenderer final : public Renderer {
     for (const auto& leaf : leaves_)
       if (leaf.payload != kEmptyLeaf && !(leaf.payload & kConstantLeaf)) cache.mark_used(leaf.key);
     for (BrickHandle& h : previous) h.release();
-    // A cut that stays the same while it waits is stalled (the pool cannot take what it asks
-    // for): as converged as this pool allows.
-    const std::array<uint64_t, 3> signature{leaves_.size(), data_leaves_, deferred_};
-    stalled_frames_ = signature == last_signature_ ? stalled_frames_ + 1 : 0;
-    last_signature_ = signature;
+    last_pinned_ = pinned;  // what the cut holds: the next frame's requests must fit beside it
+    // A cut that waits while nothing arrives is stalled (the pool cannot take what it asks for,
+    // or the requests cannot be posted for want of room): as converged as this pool allows.
+    const uint64_t uploads = cache.stats().uploads;
+    stalled_frames_ = uploads == last_uploads_ ? stalled_frames_ + 1 : 0;
+    last_uploads_ = uploads;
     // Data pointers of the leaves, read by the render threads.
     data_.assign(handles_.size(), nullptr);
     for (size_t i = 0; i < handles_.size(); ++i)
@@ -340,12 +340,17 @@ class GobbettiRenderer final : public Renderer {
     const int tiles_x = (w + 15) / 16;
     const int group = int(frame_ % uint64_t(std::max(1, p_.visibility_groups)));
     queries_ = 0;
-    std::vector<std::pair<BrickKey, bool>> known;  // this frame's verdicts on the cut's leaves
+    struct Verdict {
+      bool visible;
+      int64_t in_front;  // pixels in front of the depth buffer, counted up to visibility_pixels
+    };
+    std::vector<std::pair<BrickKey, Verdict>> known;  // this frame's verdicts on the cut's leaves
     for (const auto& leaf : leaves_) {
       if (leaf.payload == kEmptyLeaf) continue;
       const Box3d box = world_box(leaf.key);
       int r[4];
       bool visible = true;
+      int64_t in_front = p_.visibility_pixels;
       if (screen_rect(cam, box, w, h, r)) {
         if (r[0] >= r[2] || r[1] >= r[3]) continue;  // off screen: the frustum test decides
         const int cx = (r[0] + r[2]) / 2, cy = (r[1] + r[3]) / 2;
@@ -354,7 +359,7 @@ class GobbettiRenderer final : public Renderer {
         ++queries_;
         const int64_t area = int64_t(r[2] - r[0]) * int64_t(r[3] - r[1]);
         const int64_t needed = std::min<int64_t>(p_.visibility_pixels, area);
-        int64_t in_front = 0;
+        in_front = 0;
         for (int y = r[1]; y < r[3] && in_front < needed; ++y)
           for (int x = r[0]; x < r[2] && in_front < needed; ++x) {
             const Rayd ray = cam.ray(x + 0.5, y + 0.5, w, h);
@@ -364,26 +369,35 @@ class GobbettiRenderer final : public Renderer {
         visible = in_front >= needed;
       }
       cache.mark_visible(leaf.key, visible);
-      known.emplace_back(leaf.key, visible);
+      known.emplace_back(leaf.key, Verdict{visible, in_front});
     }
-    // A parent is visible when any of its children is, by their latest verdicts (this frame's,
-    // or an earlier frame's for leaves another tile group holds; untested counts as visible,
-    // empty leaves as invisible). Deepest first, so inner children are decided before parents.
-    std::unordered_map<uint64_t, bool> verdict;
-    for (const auto& leaf : leaves_)
-      verdict[leaf.key.code()] = leaf.payload != kEmptyLeaf && cache.visibility(leaf.key).value_or(true);
-    for (const auto& [key, visible] : known) verdict[key.code()] = visible;
+    // A parent is visible when any of its children is, or when its children together have
+    // visibility_pixels in front of the depth buffer (children too small to pass the threshold
+    // alone must not make their parent invisible, or the cut would collapse and refine again
+    // frame after frame). Children's verdicts are the latest: this frame's, an earlier frame's
+    // for leaves another tile group holds (untested counts as visible), none for empty leaves.
+    // Deepest first, so inner children are decided before their parents.
+    std::unordered_map<uint64_t, Verdict> verdict;
+    for (const auto& leaf : leaves_) {
+      const bool visible = leaf.payload != kEmptyLeaf && cache.visibility(leaf.key).value_or(true);
+      verdict[leaf.key.code()] = Verdict{visible, visible ? int64_t(p_.visibility_pixels) : 0};
+    }
+    for (const auto& [key, v] : known) verdict[key.code()] = v;
     std::sort(inner_.begin(), inner_.end(), [](const BrickKey& a, const BrickKey& b) { return a.level > b.level; });
     for (const BrickKey& parent : inner_) {
-      bool visible = false;
-      for (int c = 0; c < 8 && !visible; ++c) {
+      Verdict v{false, 0};
+      for (int c = 0; c < 8; ++c) {
         const BrickKey child = parent.child(c);
         if (!layout_.contains(child)) continue;
         auto it = verdict.find(child.code());
-        visible = it != verdict.end() && it->second;
+        if (it == verdict.end()) continue;
+        v.visible |= it->second.visible;
+        v.in_front += it->second.in_front;
       }
-      verdict[parent.code()] = visible;
-      cache.mark_visible(parent, visible);
+      v.visible |= v.in_front >= p_.visibility_pixels;
+      v.in_front = std::min<int64_t>(v.in_front, p_.visibility_pixels);
+      verdict[parent.code()] = v;
+      cache.mark_visible(parent, v.visible);
     }
   }
 
@@ -633,8 +647,9 @@ class GobbettiRenderer final : public Renderer {
   mutable FloatImage occlusion_;  // where each ray became opaque; pixels are written by one tile each
   uint64_t data_leaves_ = 0, constant_leaves_ = 0, deferred_ = 0, occluded_ = 0, requests_ = 0, queries_ = 0, pool_full_ = 0;
   double refine_seconds_ = 0, index_seconds_ = 0, visibility_seconds_ = 0;
-  std::array<uint64_t, 3> last_signature_{};
+  uint64_t last_uploads_ = 0;
   int stalled_frames_ = 0;
+  uint32_t last_pinned_ = 0;
 };
 
 }  // namespace
