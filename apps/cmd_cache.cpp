@@ -38,17 +38,6 @@ struct CachebenchOptions {
   bool windows = false;
 };
 
-std::vector<std::string> split(const std::string& s, char sep) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size()) {
-    const size_t end = s.find(sep, start);
-    out.push_back(s.substr(start, end == std::string::npos ? std::string::npos : end - start));
-    if (end == std::string::npos) break;
-    start = end + 1;
-  }
-  return out;
-}
 
 /// "zipf:objects=10000,requests=1000000,alpha=0.9,seed=1", "scan:objects=N,passes=P",
 /// "loop:objects=N,passes=P" (each may add size=BYTES).
@@ -58,7 +47,7 @@ Trace synthetic_trace(const std::string& spec) {
   std::map<std::string, double> p = {{"objects", 10000}, {"requests", 1000000}, {"alpha", 0.9},
                                      {"seed", 1},        {"passes", 10},         {"size", 1}};
   if (colon != std::string::npos)
-    for (const auto& kv : split(spec.substr(colon + 1), ',')) {
+    for (const auto& kv : split_list(spec.substr(colon + 1), ',')) {
       auto [name, value] = parse_assignment(kv, "--synthetic");
       if (!p.contains(name))
         throw Error(Errc::invalid_argument, fmt::format("'{}' is not a parameter (objects, requests, alpha, seed, passes, size)", name))
@@ -82,7 +71,7 @@ struct SizeSpec {
 
 std::vector<SizeSpec> parse_sizes(const std::string& text, uint64_t working_set) {
   std::vector<SizeSpec> out;
-  for (const auto& s : split(text, ',')) {
+  for (const auto& s : split_list(text, ',')) {
     if (!s.empty() && s.back() == '%') {
       double pct = 0;
       try {
@@ -128,7 +117,7 @@ void run_cachebench(const CachebenchOptions& o) {
     std::cout << fmt::format("wrote {} ({} records, {} format)\n", o.convert, trace.records.size(), o.to);
     return;
   }
-  const std::vector<std::string> policies = split(o.policies, ',');
+  const std::vector<std::string> policies = split_list(o.policies, ',');
   for (const auto& p : policies) make_policy(p, 1);  // unknown names fail before any work
   uint64_t demand = 0, fills = 0;
   for (const auto& r : trace.records) {

@@ -34,10 +34,7 @@ std::vector<int> parse_frames(const std::string& text, int count) {
     for (int f = 0; f < count; ++f) out.push_back(f);
     return out;
   }
-  size_t start = 0;
-  while (start <= text.size()) {
-    const size_t comma = text.find(',', start);
-    const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+  for (const std::string& item : split_list(text)) {
     const size_t dash = item.find('-');
     const auto ints = parse_int_list(dash == std::string::npos ? item : item.substr(0, dash) + "," + item.substr(dash + 1),
                                      dash == std::string::npos ? 1 : 2, "--frames");
@@ -45,8 +42,6 @@ std::vector<int> parse_frames(const std::string& text, int count) {
     if (a < 0 || b < a || b >= count)
       throw Error(Errc::invalid_argument, fmt::format("'{}' is outside the scene's frames 0-{}", item, count - 1)).with_field("--frames");
     for (int64_t f = a; f <= b; ++f) out.push_back(int(f));
-    if (comma == std::string::npos) break;
-    start = comma + 1;
   }
   return out;
 }
@@ -260,15 +255,7 @@ void run_bench(const BenchOptions& o) {
     const size_t eq = q.find('=');
     if (eq == std::string::npos || eq == 0) throw Error(Errc::invalid_argument, fmt::format("'{}' is not NAME=V1,V2,...", q)).with_field("--quality");
     std::vector<double> values;
-    std::string rest = q.substr(eq + 1);
-    size_t start = 0;
-    while (start <= rest.size()) {
-      const size_t comma = rest.find(',', start);
-      const std::string item = rest.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-      values.push_back(parse_assignment("v=" + item, "--quality").second);
-      if (comma == std::string::npos) break;
-      start = comma + 1;
-    }
+    for (const std::string& item : split_list(q.substr(eq + 1))) values.push_back(parse_assignment("v=" + item, "--quality").second);
     sweeps[q.substr(0, eq)] = values;
   }
 
@@ -277,13 +264,7 @@ void run_bench(const BenchOptions& o) {
     for (const BackendEntry& e : builtin_backends().entries())
       if (e.info.name != "reference" && e.info.accepts(DataKind::structured, scene.mode)) names.push_back(e.info.name);
   } else {
-    size_t start = 0;
-    while (start <= o.backends.size()) {
-      const size_t comma = o.backends.find(',', start);
-      names.push_back(o.backends.substr(start, comma == std::string::npos ? std::string::npos : comma - start));
-      if (comma == std::string::npos) break;
-      start = comma + 1;
-    }
+    names = split_list(o.backends);
     for (const auto& n : names) builtin_backends().find(n);  // unknown names fail before any rendering
   }
   // A swept parameter that none of these back ends declares is a misspelling, not a no-op.

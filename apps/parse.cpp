@@ -67,6 +67,18 @@ std::pair<double, double> parse_range(std::string_view text, std::string_view op
   return {v[0], v[1]};
 }
 
+std::vector<std::string> split_list(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  while (start <= s.size()) {
+    const size_t end = s.find(sep, start);
+    out.push_back(s.substr(start, end == std::string::npos ? std::string::npos : end - start));
+    if (end == std::string::npos) break;
+    start = end + 1;
+  }
+  return out;
+}
+
 std::vector<int64_t> parse_int_list(std::string_view text, size_t count, std::string_view option) {
   const auto v = parse_numbers(text, option, fmt::format("{} integers", count));
   std::vector<int64_t> out;

@@ -17,6 +17,8 @@ Vec3s parse_size(std::string_view text, std::string_view option);
 Vec3d parse_vec3(std::string_view text, std::string_view option);
 /// @brief "LO,HI" finite numbers with LO <= HI.
 std::pair<double, double> parse_range(std::string_view text, std::string_view option);
+/// @brief "a,b,,c" -> {"a", "b", "", "c"}: every item between separators, empty ones kept.
+std::vector<std::string> split_list(const std::string& text, char separator = ',');
 /// @brief Exactly `count` comma-separated integers.
 std::vector<int64_t> parse_int_list(std::string_view text, size_t count, std::string_view option);
 /// @brief "name=value" with a finite numeric value.

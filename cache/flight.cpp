@@ -20,12 +20,11 @@ Box3d brick_world_box(const StoreLayout& layout, const Manifest& m, const BrickK
   return box;
 }
 
-namespace {
-double distance_to(const Box3d& box, const Vec3d& p) {
-  const Vec3d d = max(max(box.lo - p, p - box.hi), Vec3d(0.0));
-  return length(d);
+double brick_voxel_pixels(const StoreLayout& layout, const Manifest& manifest, const Camera& cam, const BrickKey& key,
+                          const Box3d& world_box, int height) {
+  const double voxel = max_component(manifest.spacing) * double(int64_t(1) << layout.steps(int(key.level)));
+  return cam.projected_pixels(voxel, distance(world_box, cam.eye), height);
 }
-}  // namespace
 
 std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const FlightOptions& options,
                              const std::function<void(const FlightFrame&)>& on_frame) {
@@ -33,7 +32,6 @@ std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const Fl
   const Manifest& manifest = cache.store().manifest();
   const NodeTable& nodes = cache.nodes();
   const Box3d world{manifest.origin, manifest.origin + manifest.spacing * Vec3d(layout.dims - Vec3s(1))};
-  const double voxel = max_component(manifest.spacing);
   const int frames = options.frames > 0 ? options.frames : path.frames;
   std::vector<FlightFrame> out;
 
@@ -65,8 +63,8 @@ std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const Fl
       if (!cam.may_see(box, path.width, path.height)) continue;
       const NodeRecord& n = nodes.at(k);
       if (n.is_constant()) continue;  // renderers integrate constant nodes analytically
-      const double d = distance_to(box, cam.eye);
-      const double pixels = cam.projected_pixels(voxel * double(int64_t(1) << layout.steps(int(k.level))), d, path.height);
+      const double d = distance(box, cam.eye);
+      const double pixels = brick_voxel_pixels(layout, manifest, cam, k, box, path.height);
       if (pixels <= options.lod_ratio || int(k.level) == layout.finest()) {
         chosen.push_back({k, d, float(pixels)});
         continue;

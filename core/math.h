@@ -109,6 +109,12 @@ struct Box3 {
   friend std::ostream& operator<<(std::ostream& os, const Box3& b) { return os << '[' << b.lo << " .. " << b.hi << ']'; }
 };
 
+/// @brief Distance from p to the nearest point of the box (0 inside it).
+template <typename T>
+T distance(const Box3<T>& box, const Vec3<T>& p) {
+  return length(max(max(box.lo - p, p - box.hi), Vec3<T>(T(0))));
+}
+
 using Box3f = Box3<float>;
 using Box3d = Box3<double>;
 using Box3i = Box3<int32_t>;

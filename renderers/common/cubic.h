@@ -109,6 +109,22 @@ inline std::optional<double> first_root(const Cubic& g, double length, double to
   return std::nullopt;
 }
 
+/// @brief The crossing of a function between two samples that bracket it: g(a) = ga and
+/// g(b) = gb differ in sign, or gb is exactly zero (then b is the crossing). `steps` bisections
+/// (each one evaluation of g) narrow the bracket; the result is its midpoint. The marching back
+/// ends refine their isosurface hits with it.
+template <typename G>
+double bisect_crossing(G&& g, double a, double b, double ga, double gb, int steps) {
+  if (gb == 0) return b;
+  for (int it = 0; it < steps; ++it) {
+    const double mid = 0.5 * (a + b);
+    const double gm = g(mid);
+    if ((gm < 0) == (ga < 0)) a = mid, ga = gm;
+    else b = mid;
+  }
+  return 0.5 * (a + b);
+}
+
 /// @brief Largest value of g on [0, length] and where it is (the first place, on ties).
 inline double cubic_max(const Cubic& g, double length, double& where) {
   where = 0;

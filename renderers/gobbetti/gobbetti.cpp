@@ -27,8 +27,10 @@
 
 #include <fmt/format.h>
 
+#include "cache/flight.h"
 #include "core/timing.h"
 #include "renderers/common/cell_accessor.h"
+#include "renderers/common/cubic.h"
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
@@ -57,6 +59,7 @@ class GobbettiRenderer final : public Renderer {
   GobbettiRenderer(const RenderContext& ctx, const GobbettiParams& p)
       : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), layout_(ctx.layout()), p_(p), shading_(scene_.shading, geo_) {
     lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
+    clip_world_ = Box3d(geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi));
     M_ = layout_.brick_size;
     A_ = ctx.cache().format().apron;
     E_ = ctx.cache().format().edge();
@@ -129,25 +132,9 @@ class GobbettiRenderer final : public Renderer {
     bool operator<(const Candidate& o) const { return pixels < o.pixels; }
   };
 
-  /// The node's nominal octree box in finest voxel coordinates, clipped to the volume.
-  Box3d voxel_box(const BrickKey& k) const {
-    const double size = double(M_) * double(int64_t(1) << layout_.steps(int(k.level)));
-    Box3d b;
-    for (int a = 0; a < 3; ++a) {
-      b.lo[a] = double(k.coords()[a]) * size;
-      b.hi[a] = std::min(b.lo[a] + size, double(geo_.dims[a] - 1));
-    }
-    return b;
-  }
-  Box3d world_box(const BrickKey& k) const {
-    const Box3d v = voxel_box(k);
-    return {geo_.to_world(v.lo), geo_.to_world(v.hi)};
-  }
+  Box3d world_box(const BrickKey& k) const { return brick_world_box(layout_, ctx_.manifest(), k); }
   double voxel_pixels(const BrickKey& k, const Camera& cam, int height) const {
-    const Box3d box = world_box(k);
-    const Vec3d d = max(max(box.lo - cam.eye, cam.eye - box.hi), Vec3d(0.0));
-    const double voxel = max_component(geo_.spacing) * double(int64_t(1) << layout_.steps(int(k.level)));
-    return cam.projected_pixels(voxel, length(d), height);
+    return brick_voxel_pixels(layout_, ctx_.manifest(), cam, k, world_box(k), height);
   }
   bool was_visible(const BrickKey& k) const {
     if (!p_.visibility) return true;
@@ -161,9 +148,9 @@ class GobbettiRenderer final : public Renderer {
     if (!ctx_.cache().layout().contains(k)) return NodeUse::empty;
     const NodeRecord& n = ctx_.nodes().at(k);
     if (!ctx_.node_visible(n)) return NodeUse::empty;
-    if (!cam.may_see(world_box(k), width, height)) return NodeUse::empty;
-    if (scene_.clip && !world_box(k).overlaps({geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi)}))
-      return NodeUse::empty;
+    const Box3d box = world_box(k);
+    if (!cam.may_see(box, width, height)) return NodeUse::empty;
+    if (scene_.clip && !box.overlaps(clip_world_)) return NodeUse::empty;
     return n.is_constant() ? NodeUse::constant : NodeUse::data;
   }
 
@@ -525,15 +512,13 @@ class GobbettiRenderer final : public Renderer {
           for (size_t s = 0; s < surfaces.size(); ++s) {
             const double g = v - surfaces[s].value;
             if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
-              double lo = prev_t, hi = t, glo = prev[s];
-              for (int it = 0; it < r.p_.refine && g != 0; ++it) {
-                const double mid = 0.5 * (lo + hi);
-                ++counters.samples;
-                const double gm = b.sample(mid) - surfaces[s].value;
-                if ((gm < 0) == (glo < 0)) lo = mid, glo = gm;
-                else hi = mid;
-              }
-              const double th = g == 0 ? t : 0.5 * (lo + hi);
+              const double iso = surfaces[s].value;
+              const double th = bisect_crossing(
+                  [&](double m) {
+                    ++counters.samples;
+                    return b.sample(m) - iso;
+                  },
+                  prev_t, t, prev[s], g, r.p_.refine);
               if (th < hit_t) hit_t = th, hit_s = int(s), hit_brick = b;
             }
             prev[s] = g;
@@ -632,6 +617,7 @@ class GobbettiRenderer final : public Renderer {
   GobbettiParams p_;
   ShadingModel shading_;
   double lod_ratio_ = 1;
+  Box3d clip_world_;  // the rendered region in world coordinates
   int64_t M_ = 32, A_ = 1, E_ = 34;
   std::vector<double> step_by_level_;   // sampling step per level, finest voxels
   std::vector<TfTable> tf_by_level_;    // the 2D transfer-function table: opacity corrected per level

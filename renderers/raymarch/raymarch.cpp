@@ -11,6 +11,7 @@
 #include <memory>
 
 #include "renderers/common/cell_accessor.h"
+#include "renderers/common/cubic.h"
 #include "renderers/common/grid_walk.h"
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
@@ -135,16 +136,9 @@ class RaymarchRenderer final : public Renderer {
         for (size_t s = 0; s < ns; ++s) {
           const float g = v - float(surfaces[s].value);
           if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
-            // Bisection between the two samples.
-            double lo = t_prev, hi = t;
-            float glo = prev[s];
-            for (int it = 0; it < r.p_.refine && g != 0; ++it) {
-              const double mid = 0.5 * (lo + hi);
-              const float gm = sample(o, d, mid) - float(surfaces[s].value);
-              if ((gm < 0) == (glo < 0)) lo = mid, glo = gm;
-              else hi = mid;
-            }
-            const double th = g == 0 ? t : 0.5 * (lo + hi);
+            const float iso = float(surfaces[s].value);
+            const double th = bisect_crossing([&](double m) { return sample(o, d, m) - iso; }, t_prev, t, prev[s], g,
+                                              r.p_.refine);
             if (th < hit_t) hit_t = th, hit_s = int(s);
           }
           prev[s] = g;

@@ -199,14 +199,7 @@ class ReferenceRenderer final : public Renderer {
         for (size_t s = 0; s < surfaces.size(); ++s) {
           const double gb = g(tb, s);
           if ((prev[s] < 0) != (gb < 0) || gb == 0) {
-            double lo = ta, hi = tb, glo = prev[s];
-            for (int it = 0; it < 80 && gb != 0; ++it) {
-              const double mid = 0.5 * (lo + hi);
-              const double gm = g(mid, s);
-              if ((gm < 0) == (glo < 0)) lo = mid, glo = gm;
-              else hi = mid;
-            }
-            const double t = gb == 0 ? tb : 0.5 * (lo + hi);
+            const double t = bisect_crossing([&](double m) { return g(m, s); }, ta, tb, prev[s], gb, 80);
             if (t < hit.t) hit = Hit{t, int(s), {}};
           }
           prev[s] = gb;
