@@ -7,7 +7,8 @@
 #define BRICKYARD_BACKENDS(X) \
   X(reference)                \
   X(raymarch)                 \
-  X(gobbetti)
+  X(gobbetti)                 \
+  X(gigavoxels)
 
 namespace brickyard {
 

@@ -26,24 +26,30 @@ FrameStats render_frame(Renderer& renderer, const RenderContext& context, const 
   renderer.begin_frame(setup);
   stats.add_phase("prepare", watch.seconds());
 
-  watch = Stopwatch();
   const int tiles_x = (setup.width + kTileSize - 1) / kTileSize, tiles_y = (setup.height + kTileSize - 1) / kTileSize;
   std::vector<RayCounters> tile_counters(size_t(tiles_x) * size_t(tiles_y));
-  parallel_for<int>(0, tiles_x * tiles_y, 1, [&](int begin, int end) {
-    for (int t = begin; t < end; ++t) {
-      const int tx = t % tiles_x, ty = t / tiles_x;
-      const Tile tile{tx * kTileSize, ty * kTileSize, std::min(setup.width, (tx + 1) * kTileSize),
-                      std::min(setup.height, (ty + 1) * kTileSize)};
-      renderer.render_tile(setup, tile, out, tile_counters[size_t(t)]);
-    }
-  });
+  double render_seconds = 0, finish_seconds = 0;
+  do {
+    watch = Stopwatch();
+    parallel_for<int>(0, tiles_x * tiles_y, 1, [&](int begin, int end) {
+      for (int t = begin; t < end; ++t) {
+        const int tx = t % tiles_x, ty = t / tiles_x;
+        const Tile tile{tx * kTileSize, ty * kTileSize, std::min(setup.width, (tx + 1) * kTileSize),
+                        std::min(setup.height, (ty + 1) * kTileSize)};
+        renderer.render_tile(setup, tile, out, tile_counters[size_t(t)]);
+      }
+    });
+    render_seconds += watch.seconds();
+    watch = Stopwatch();
+    renderer.end_frame(setup, out);
+    finish_seconds += watch.seconds();
+  } while (renderer.another_pass());
   for (const RayCounters& c : tile_counters) stats.counters += c;
-  stats.add_phase("render", watch.seconds());
+  stats.add_phase("render", render_seconds);
 
   watch = Stopwatch();
-  renderer.end_frame(setup, out);
   const FrameReport report = cache.frame_end();
-  stats.add_phase("finish", watch.seconds());
+  stats.add_phase("finish", finish_seconds + watch.seconds());
   stats.seconds = frame_watch.seconds();
   renderer.add_statistics(stats);
 

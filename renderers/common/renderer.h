@@ -122,6 +122,10 @@ class Renderer {
   virtual void begin_frame(const FrameSetup& setup) { (void)setup; }
   virtual void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const = 0;
   virtual void end_frame(const FrameSetup& setup, const FrameBuffers& out) { (void)setup, (void)out; }
+  /// @brief After end_frame(): whether rays stopped at missing data and the tiles must be
+  /// rendered again, resuming them (an exact mode that loads between passes). Each further
+  /// pass is followed by end_frame() again.
+  virtual bool another_pass() { return false; }
   /// @brief Adds the back end's own figures (phases, working-set sizes) to the frame's statistics.
   virtual void add_statistics(FrameStats& stats) const { (void)stats; }
   /// @brief Whether the last frame showed everything the back end wants to show: false while

@@ -1,0 +1,759 @@
+// `gigavoxels`: GigaVoxels (Crassin, Neyret, Lefebvre and Eisemann 2009) on the CPU, keeping
+// its GPU structure: a node pool and a brick pool of fixed size (node_tree.h), rays that decide
+// by their own traversal what is used, what must be subdivided and what is missing, per-pixel
+// feedback lists compacted before the loader sees them (feedback.h), and a loader that only
+// reads the compacted lists.
+//
+// Per ray: from the volume's entry point, kd-restart descent from the root at every new
+// position, stopping at the node whose voxels match the ray's cone footprint there (a voxel
+// covers at most lod_ratio pixels), collecting the bricks of the last 3 levels met. Constant
+// nodes are integrated in closed form; brick nodes are marched with a step and a mip level
+// chosen from the footprint, blending the two nearest levels (quadrilinear filtering). A node
+// that should be finer asks to be subdivided, a node without its brick asks for it (at most one
+// request per ray); the ray goes on with coarser data (approximate mode) or stops and resumes
+// after the loader has served the pass (exact mode).
+// Between frames (end_frame, one thread): compaction, usage stamps, LRU order, then the
+// requests within the per-frame budgets.
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <unordered_map>
+
+#include <fmt/format.h>
+
+#include "core/timing.h"
+#include "renderers/common/cell_accessor.h"
+#include "renderers/common/cubic.h"
+#include "renderers/common/pixel.h"
+#include "renderers/common/renderer.h"
+#include "renderers/common/shading.h"
+#include "renderers/gigavoxels/feedback.h"
+#include "renderers/gigavoxels/node_tree.h"
+#include "renderers/gigavoxels/preintegrated.h"
+#include "renderers/gigavoxels/procedural.h"
+
+namespace brickyard {
+namespace {
+
+using gigavoxels::Node;
+using gigavoxels::NodeAddress;
+using gigavoxels::NodeContent;
+using gigavoxels::NodeTree;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Feedback entries: a node address and what the ray wants of it.
+constexpr uint32_t kAddressMask = 0x3fffffffu;
+constexpr uint32_t kWantsSubdivision = 0x80000000u;
+constexpr uint32_t kWantsBrick = 0x40000000u;
+
+struct GigaVoxelsParams {
+  double lod_ratio = 0;  // 0: the scene's quality.lod_ratio
+  double step = 0.5;     // in voxels of the level sampled
+  bool exact = false;
+  bool quadrilinear = true;
+  int slots_per_pixel = 4;
+  int subdivide_budget = 512;  // subdivisions per frame
+  int upload_budget = 512;     // bricks written into the pool per frame
+  uint32_t brick_slots = 0;    // 0: as many as the scene's L1 budget holds
+  uint32_t node_blocks = 0;    // 0: twice the brick slots
+  int source = 0;              // 0 store, 1 Menger sponge (N = 3)
+  int menger_brick = 27;
+  int max_passes = 256;        // exact mode
+  int refine = 6;
+};
+
+/// Where bricks come from: the store through the cache, or a procedural producer.
+class Source {
+ public:
+  virtual ~Source() = default;
+  virtual int arity() const = 0;
+  virtual int brick_size() const = 0;
+  virtual int max_depth() const = 0;
+  virtual NodeContent classify(const NodeAddress& a) const = 0;
+  /// Writes the node's (M + 2)^3 values; false when the data is not resident yet (then it has
+  /// been requested). With wait, blocks until it is.
+  virtual bool fill(const NodeAddress& a, float* out, bool wait, float priority) = 0;
+  /// Bricks shared by many nodes (instancing): an id, or 0 for a brick of its own.
+  virtual uint64_t shared_id(const NodeAddress& a) const { (void)a; return 0; }
+};
+
+template <typename Stored>
+class StoreSource final : public Source {
+ public:
+  explicit StoreSource(const RenderContext& ctx) : ctx_(ctx), layout_(ctx.layout()) {}
+  int arity() const override { return 2; }
+  int brick_size() const override { return layout_.brick_size; }
+  int max_depth() const override { return layout_.finest(); }
+  NodeContent classify(const NodeAddress& a) const override {
+    const BrickKey k = key(a);
+    NodeContent c;
+    if (!layout_.contains(k)) return c;  // outside the volume: nothing
+    const NodeRecord& n = ctx_.nodes().at(k);
+    c.lo = n.min, c.hi = n.max;
+    // Nodes this scene cannot see are constants that contribute nothing (their minimum is
+    // outside every isovalue's range, or maps to zero opacity).
+    if (n.is_constant()) c.value = n.constant;
+    else if (!ctx_.node_visible(n)) c.value = std::numeric_limits<float>::quiet_NaN();  // nothing to see
+    else c.kind = NodeContent::brick;
+    return c;
+  }
+  bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
+    const BrickKey k = key(a);
+    BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, true);
+    if (!h.resident()) return false;
+    const Stored* src = h.template voxels<Stored>();
+    const int64_t m = layout_.brick_size, e = m + 2, es = ctx_.cache().format().edge(), skip = ctx_.cache().format().apron - 1;
+    for (int64_t z = 0; z < e; ++z)
+      for (int64_t y = 0; y < e; ++y) {
+        const Stored* row = src + ((z + skip) * es + (y + skip)) * es + skip;
+        float* dst = out + (z * e + y) * e;
+        for (int64_t x = 0; x < e; ++x) dst[x] = float(row[x]);
+      }
+    return true;
+  }
+
+ private:
+  static BrickKey key(const NodeAddress& a) { return {uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)}; }
+  const RenderContext& ctx_;
+  const StoreLayout& layout_;
+};
+
+class ProducerSource final : public Source {
+ public:
+  ProducerSource(std::unique_ptr<gigavoxels::BrickProducer> p, bool instanced) : p_(std::move(p)), instanced_(instanced) {}
+  int arity() const override { return p_->arity(); }
+  int brick_size() const override { return p_->brick_size(); }
+  int max_depth() const override { return p_->max_depth(); }
+  NodeContent classify(const NodeAddress& a) const override { return p_->classify(a); }
+  bool fill(const NodeAddress& a, float* out, bool, float) override {
+    p_->produce(a, out);
+    return true;
+  }
+  uint64_t shared_id(const NodeAddress& a) const override { return instanced_ ? p_->brick_id(a) + 1 : 0; }
+
+ private:
+  std::unique_ptr<gigavoxels::BrickProducer> p_;
+  bool instanced_;
+};
+
+template <typename Stored>
+class GigaVoxelsRenderer final : public Renderer {
+ public:
+  GigaVoxelsRenderer(const RenderContext& ctx, const GigaVoxelsParams& p, std::unique_ptr<Source> source)
+      : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), p_(p), shading_(scene_.shading, geo_), source_(std::move(source)),
+        tree_(source_->arity(), node_blocks(ctx, p, *source_), brick_slots(ctx, p, *source_), source_->brick_size()) {
+    lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
+    n_ = source_->arity();
+    m_ = source_->brick_size();
+    // The tree's unit cube in finest voxel-edge coordinates: the root brick's extent for a
+    // store (its levels halve up to one brick), the volume's box for a producer.
+    const StoreLayout& layout = ctx.layout();
+    extent_ = p.source == 1 ? double(geo_.dims.x) : double(layout.brick_size) * double(int64_t(1) << layout.finest());
+    if (p.source == 1 && (geo_.dims.y != geo_.dims.x || geo_.dims.z != geo_.dims.x))
+      throw Error(Errc::unsupported, "gigavoxels source=menger needs a cubic volume (its box is the sponge)").with_file(ctx.cache().store().path());
+    if (p.source == 1) outside_value_ = 0.0f;
+    if (scene_.mode == RenderMode::dvr) preintegrated_ = gigavoxels::PreintegratedTf(scene_.transfer_function);
+    const double factor = scene_.mode == RenderMode::iso ? scene_.quality.step_factor
+                                                         : scene_.quality.step_factor / scene_.sampling_rate;
+    step_ = p.step * factor;
+    finest_voxel_unit_ = 1.0 / extent_;  // one finest voxel in unit coordinates (opacity reference)
+    tree_.set_root(root_node(), NodeAddress{});
+    if (p.source == 0 && ctx.cache().format().apron < 1)
+      throw Error(Errc::unsupported, "gigavoxels copies bricks with a 1-voxel border: the store needs an apron of at least 1")
+          .with_file(ctx.cache().store().path());
+  }
+
+  void begin_frame(const FrameSetup& setup) override {
+    ++frame_;
+    passes_ = 0;
+    interrupted_ = 0;
+    frame_subdivisions_ = frame_uploads_ = 0;
+    frame_requests_ = frame_uses_ = 0;
+    compaction_ = {};
+    loader_seconds_ = 0;
+    tree_.begin_feedback(frame_);
+    if (!uses_ || uses_->width() != setup.width || uses_->height() != setup.height)
+      uses_ = std::make_unique<gigavoxels::UseBuffer>(setup.width, setup.height, p_.slots_per_pixel);
+    uses_->begin_frame(frame_);
+    states_.assign(size_t(setup.width) * size_t(setup.height), RayState{});
+    allow_interrupt_ = p_.exact;
+    const double ty = std::tan(setup.camera.fov_degrees * kPi / 360.0);
+    pixel_angle_ = 2 * ty / double(setup.height);
+  }
+
+  void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
+    Tracer t(*this, setup, counters);
+    for (int y = tile.y0; y < tile.y1; ++y)
+      for (int x = tile.x0; x < tile.x1; ++x) {
+        RayState& s = states_[size_t(y) * size_t(setup.width) + size_t(x)];
+        if (s.status == RayState::done) continue;
+        t.pixel(x, y, s, out);
+      }
+  }
+
+  void end_frame(const FrameSetup& setup, const FrameBuffers& out) override {
+    (void)setup, (void)out;
+    ++passes_;
+    Stopwatch watch;
+    serve_feedback();
+    loader_seconds_ += watch.seconds();
+  }
+
+  bool another_pass() override {
+    if (!p_.exact) return false;
+    interrupted_ = 0;
+    for (const RayState& s : states_) interrupted_ += s.status == RayState::interrupted;
+    if (interrupted_ == 0) return false;
+    // A pass that served nothing cannot make progress: the rest of the frame takes coarser data.
+    if (last_pass_progress_ == 0 || passes_ >= uint64_t(p_.max_passes)) allow_interrupt_ = false;
+    uses_->begin_frame(frame_);
+    tree_.begin_feedback(frame_);
+    return true;
+  }
+
+  void add_statistics(FrameStats& stats) const override {
+    stats.add_phase("loader", loader_seconds_);
+    stats.backend = {{"passes", double(passes_)},
+                     {"subdivisions", double(frame_subdivisions_)},
+                     {"uploads", double(frame_uploads_)},
+                     {"feedback_uses", double(frame_uses_)},
+                     {"feedback_requests", double(frame_requests_)},
+                     {"compaction_slots", double(compaction_.uses.slots + compaction_.requests.slots)},
+                     {"compaction_removed_duplicates", double(compaction_.uses.local_duplicates + compaction_.requests.local_duplicates)},
+                     {"compaction_removed_empty", double(compaction_.uses.empty + compaction_.requests.empty)},
+                     {"node_blocks_in_use", double(tree_.blocks_in_use())},
+                     {"node_blocks", double(tree_.block_capacity())},
+                     {"bricks_in_use", double(tree_.bricks_in_use())},
+                     {"brick_slots", double(tree_.brick_capacity())},
+                     {"bricks_used", double(tree_.bricks_used_this_frame())},
+                     {"failed_allocations", double(tree_.counters().failed_allocations)},
+                     {"loader_ms", loader_seconds_ * 1e3}};
+  }
+
+  /// Approximate mode: the last frame's rays needed nothing (or nothing could be served for 3
+  /// frames); exact mode: the last pass needed nothing, or could not be served.
+  bool converged() const override {
+    return p_.exact ? last_pass_requests_ == 0 || last_pass_progress_ == 0 : frame_requests_ == 0 || stalled_frames_ >= 3;
+  }
+
+  const NodeTree& tree() const { return tree_; }
+
+ private:
+  static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
+    if (p.brick_slots) return p.brick_slots;
+    const uint64_t e = uint64_t(s.brick_size() + 2);
+    return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / (e * e * e * 4), 8, 1u << 20));
+  }
+  static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
+    return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
+  }
+
+  Node node_for(const NodeContent& c, int depth) const {
+    if (c.kind == NodeContent::constant) return Node::make_constant(c.value);
+    return Node::make_data(depth >= source_->max_depth());
+  }
+  Node root_node() const { return node_for(source_->classify(NodeAddress{}), 0); }
+
+  // --- the loader ---------------------------------------------------------------------------
+  /// Writes a brick for the node if its data is available (or shared and resident already).
+  bool upload(uint32_t address, bool wait) {
+    const NodeAddress a = tree_.address_of(address);
+    if (const uint64_t id = source_->shared_id(a)) {
+      auto it = shared_.find(id);
+      if (it != shared_.end()) {
+        Node n = tree_.node(address);
+        n.set_brick(it->second);
+        tree_.set_node(address, n);
+        return true;
+      }
+    }
+    scratch_.resize(tree_.brick_values());
+    if (!source_->fill(a, scratch_.data(), wait, float(a.depth))) return false;
+    const uint32_t slot = tree_.allocate_brick(address);
+    if (slot == gigavoxels::kNoAddress) return false;
+    std::copy(scratch_.begin(), scratch_.end(), tree_.brick_data(slot));
+    if (const uint64_t id = source_->shared_id(a)) {
+      tree_.keep_brick(slot);
+      shared_[id] = slot;
+    }
+    ++frame_uploads_;
+    return true;
+  }
+
+  void serve_feedback() {
+    const gigavoxels::CompactionReport report = compactor_.compact(*uses_, used_list_, request_list_);
+    compaction_.uses.slots += report.uses.slots, compaction_.uses.empty += report.uses.empty;
+    compaction_.uses.local_duplicates += report.uses.local_duplicates, compaction_.uses.out += report.uses.out;
+    compaction_.requests.slots += report.requests.slots, compaction_.requests.empty += report.requests.empty;
+    compaction_.requests.local_duplicates += report.requests.local_duplicates, compaction_.requests.out += report.requests.out;
+    frame_uses_ += used_list_.size();
+    frame_requests_ += request_list_.size();
+    last_pass_requests_ = request_list_.size();
+    for (uint32_t e : used_list_) tree_.mark_used(e & kAddressMask);
+    for (uint32_t e : request_list_) tree_.mark_used(e & kAddressMask);
+    tree_.end_of_feedback();
+    const bool wait = allow_interrupt_;
+    int subdivisions = 0, uploads = 0;
+    last_pass_progress_ = 0;
+    for (uint32_t e : request_list_) {
+      const uint32_t address = e & kAddressMask;
+      Node n = tree_.node(address);
+      if ((e & kWantsSubdivision) && !n.has_children() && !n.max_refined() && !n.constant()) {
+        if (subdivisions >= p_.subdivide_budget) continue;
+        const uint32_t base = tree_.subdivide(address);
+        if (base == gigavoxels::kNoAddress) continue;
+        ++subdivisions, ++frame_subdivisions_, ++last_pass_progress_;
+        for (int i = 0; i < tree_.block_nodes(); ++i) {
+          const NodeAddress a = tree_.address_of(base + uint32_t(i));
+          tree_.set_node(base + uint32_t(i), node_for(source_->classify(a), a.depth));
+        }
+        // The children's bricks come with the subdivision when the data is at hand; the rest
+        // are requested now and asked for again by the rays that need them.
+        for (int i = 0; i < tree_.block_nodes() && uploads < p_.upload_budget; ++i) {
+          const uint32_t child = base + uint32_t(i);
+          if (!tree_.node(child).constant() && upload(child, wait)) ++uploads, ++last_pass_progress_;
+        }
+      } else if ((e & kWantsBrick) && !n.has_brick() && !n.constant()) {
+        if (uploads >= p_.upload_budget) continue;
+        if (upload(address, wait)) ++uploads, ++last_pass_progress_;
+      }
+    }
+    const bool progress = last_pass_progress_ > 0;
+    if (passes_ == 1) stalled_frames_ = progress || request_list_.empty() ? 0 : stalled_frames_ + 1;
+  }
+
+  // --- rays ----------------------------------------------------------------------------------
+  /// What a ray has done so far: exact mode interrupts rays at missing data and resumes them.
+  struct RayState {
+    enum Status : uint8_t { fresh, interrupted, done } status = fresh;
+    double t = 0;
+    Vec3d accum{0.0};
+    double alpha = 0;
+    double prev_t = 0;
+    float prev_value = 0;
+    bool have_prev = false;
+  };
+
+  /// A brick as a sample sees it: the pool slot, its node's depth and origin.
+  struct LevelBrick {
+    const float* data = nullptr;
+    int depth = -1;
+    double scale = 1;    // N^depth
+    double origin[3] = {};  // node coordinates (c)
+  };
+
+  struct Tracer {
+    const GigaVoxelsRenderer& r;
+    const FrameSetup& setup;
+    RayCounters& counters;
+    const bool gradients;
+
+    Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
+        : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)) {}
+
+    /// Trilinear value (and gradient per unit coordinate) of a brick at a unit position.
+    float sample_brick(const LevelBrick& b, const double p[3], Vec3d* gradient) const {
+      const int64_t e = r.m_ + 2;
+      const float top = float(e - 1);
+      int64_t cell[3];
+      float u[3];
+      for (int a = 0; a < 3; ++a) {
+        const float l = std::clamp(float((p[a] * b.scale - b.origin[a]) * double(r.m_) + 0.5), 0.0f, top);
+        cell[a] = std::min<int64_t>(int64_t(l), e - 2);
+        u[a] = l - float(cell[a]);
+      }
+      const float* q = b.data + (cell[2] * e + cell[1]) * e + cell[0];
+      const int64_t dy = e, dz = e * e;
+      const float c[8] = {q[0], q[1], q[dy], q[dy + 1], q[dz], q[dz + 1], q[dz + dy], q[dz + dy + 1]};
+      if (gradient) *gradient = Vec3d(trilinear_gradient(c, u[0], u[1], u[2])) * (b.scale * double(r.m_));
+      return trilinear(c, u[0], u[1], u[2]);
+    }
+
+    /// The ray's bricks of the last levels met in the descent, coarsest first.
+    struct Levels {
+      LevelBrick b[3];
+      int count = 0;
+      void push(const LevelBrick& l) {
+        if (count == 3) b[0] = b[1], b[1] = b[2], count = 2;
+        b[count++] = l;
+      }
+    };
+
+    /// Quadrilinear: the two levels around the footprint's depth lambda, among those collected.
+    float sample(const Levels& lv, double lambda, const double p[3], Vec3d* gradient) const {
+      const LevelBrick& fine = lv.b[lv.count - 1];
+      if (!r.p_.quadrilinear || lv.count == 1 || lambda >= fine.depth) return sample_brick(fine, p, gradient);
+      int i = lv.count - 1;
+      while (i > 0 && lv.b[i - 1].depth > lambda) --i;  // b[i] finer than lambda, b[i-1] coarser
+      if (i == 0) return sample_brick(lv.b[0], p, gradient);
+      const LevelBrick& coarse = lv.b[i - 1];
+      const LevelBrick& finer = lv.b[i];
+      const double w = std::clamp((lambda - coarse.depth) / double(finer.depth - coarse.depth), 0.0, 1.0);
+      Vec3d gc(0.0), gf(0.0);
+      const float vc = sample_brick(coarse, p, gradient ? &gc : nullptr);
+      const float vf = sample_brick(finer, p, gradient ? &gf : nullptr);
+      if (gradient) *gradient = gc * (1 - w) + gf * w;
+      return float(vc * (1 - w) + vf * w);
+    }
+
+    void pixel(int x, int y, RayState& s, FrameBuffers& out) {
+      ++counters.rays;
+      const PrimaryRay ray = primary_ray(setup, r.geo_, x, y);
+      gigavoxels::RayRecorder rec = r.uses_->recorder(x, y);
+      PixelResult px;
+      px.color = r.scene_.background;
+      if (ray.hits()) {
+        if (s.status == RayState::fresh) {
+          s.t = ray.span.t0;
+          // A procedural volume is empty outside its box: entering a solid region is a surface.
+          if (r.outside_value_) s.prev_value = *r.outside_value_, s.prev_t = s.t, s.have_prev = true;
+        }
+        march(ray, s, rec, px);
+      } else {
+        s.status = RayState::done;
+      }
+      rec.finish();
+      if (s.status == RayState::done) write_pixel(out, x, y, px);
+    }
+
+    /// The ray's position in the tree's unit cube.
+    void unit_point(const PrimaryRay& ray, double t, double p[3]) const {
+      for (int a = 0; a < 3; ++a) p[a] = (ray.org[a] + 0.5 + ray.dir[a] * t) / r.extent_;
+    }
+
+    void march(const PrimaryRay& ray, RayState& s, gigavoxels::RayRecorder& rec, PixelResult& px) {
+      const bool iso = r.scene_.mode == RenderMode::iso;
+      const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
+      const double inv_dir[3] = {1.0 / (ray.dir[0] / r.extent_), 1.0 / (ray.dir[1] / r.extent_), 1.0 / (ray.dir[2] / r.extent_)};
+      const double stop = r.scene_.quality.termination_opacity;
+      const int n = r.n_;
+      double t = s.t;
+      double hit_t = kInf;
+      Vec3d hit_gradient(0.0);
+      bool requested = false;
+      int exit_axis = -1;
+      while (t < ray.span.t1) {
+        double p[3];
+        unit_point(ray, t, p);
+        // Footprint of a pixel at t, in unit coordinates, and the depth whose voxels match it.
+        const double footprint = std::max(t, 1e-12) * r.pixel_angle_ / r.geo_.voxel_size / r.extent_ * r.lod_ratio_;
+        const double lambda = std::log(1.0 / (double(r.m_) * footprint)) / std::log(double(n));
+        // kd-restart descent.
+        Levels lv;
+        uint32_t address = 0;
+        Node node = r.tree_.node(0);
+        int depth = 0;
+        double scale = 1;
+        int64_t c[3] = {0, 0, 0};
+        uint32_t want = 0;
+        for (;;) {
+          ++counters.nodes;
+          if (node.has_brick()) lv.push({r.tree_.brick(node.brick()), depth, scale, {double(c[0]), double(c[1]), double(c[2])}});
+          if (node.constant()) break;
+          if (depth >= lambda) break;  // its voxels cover at most lod_ratio pixels
+          if (!node.has_children()) {
+            if (!node.max_refined()) want = kWantsSubdivision;
+            break;
+          }
+          int child = 0, stride = 1;
+          for (int a = 0; a < 3; ++a, stride *= n) {
+            const int64_t ci = std::clamp<int64_t>(int64_t(std::floor(p[a] * scale * n)) - c[a] * n, 0, n - 1);
+            c[a] = c[a] * n + ci;
+            child += int(ci) * stride;
+          }
+          address = r.tree_.child_address(node, child);
+          node = r.tree_.node(address);
+          ++depth;
+          scale *= n;
+        }
+        if (!node.constant() && !node.has_brick()) want = kWantsBrick;
+        // The node's exit along the ray.
+        double t_exit = ray.span.t1;
+        const int entry_axis = exit_axis;
+        for (int a = 0; a < 3; ++a) {
+          if (!std::isfinite(inv_dir[a])) continue;
+          const double face = (double(c[a]) + (ray.dir[a] > 0 ? 1.0 : 0.0)) / scale;
+          const double ta = ((face * r.extent_ - 0.5 - ray.org[a]) / r.extent_) * inv_dir[a];
+          if (ta < t_exit) t_exit = ta, exit_axis = a;
+        }
+        const double t_face = std::min(std::max(t_exit, t), ray.span.t1);
+        // A hair past the exit, so the next descent lands in the next node.
+        const double node_t = 1.0 / scale / unit_per_t;
+        t_exit = std::max(t_exit, t) + 1e-7 * node_t;
+        rec.used(address);
+        if (want && !requested) {
+          rec.request(address | want);
+          requested = true;
+          if (r.allow_interrupt_) {
+            s.t = t;
+            s.status = RayState::interrupted;
+            return;
+          }
+        }
+        const double t_end = std::min(t_exit, ray.span.t1);
+        if (node.constant()) {
+          const float v = node.value();
+          if (std::isnan(v)) {  // a region this scene cannot see
+            s.have_prev = false;
+          } else if (iso) {
+            // A constant region is a sample of known value all along it: the surface is at its
+            // face when the value steps across an isovalue there.
+            for (size_t k = 0; k < r.scene_.isosurfaces.size(); ++k)
+              if (v == r.scene_.isosurfaces[k].value) hit_t = std::min(hit_t, t), hit_surface = int(k);
+            if (hit_t == kInf && s.have_prev && crossing(s.prev_value, v)) hit_t = t, hit_surface = first_crossed(s.prev_value, v);
+            if (hit_t < kInf) {
+              hit_levels.count = 0;  // a face: its normal is the axis the ray entered through
+              face_axis = entry_axis;
+              break;
+            }
+            s.prev_value = v, s.prev_t = t_face, s.have_prev = true;
+          } else {
+            Vec3f col;
+            float a;
+            r.preintegrated_.segment(float(v), float(v), (t_end - t) * unit_per_t / r.finest_voxel_unit_, col, a);
+            composite(s, px, col, a, t, Vec3d(0.0), ray);
+            if (s.alpha >= stop) break;
+          }
+          t = t_exit;
+          continue;
+        }
+        if (lv.count == 0) {  // nothing resident yet, not even the root's brick
+          s.have_prev = false;
+          t = t_exit;
+          continue;
+        }
+        ++counters.bricks;
+        // March the node with a step from the footprint (never finer than the finest level met).
+        const LevelBrick& fine = lv.b[lv.count - 1];
+        const double fine_voxel = 1.0 / (double(r.m_) * fine.scale);
+        bool finished = false;
+        // Iso: one more sample at the node's exit, so that a crossing in the last part-step is
+        // bracketed even when the next node is empty.
+        for (bool last = false; !last;) {
+          if (t >= t_end) {
+            if (!iso || (s.have_prev && s.prev_t >= t_face)) break;
+            t = t_face;
+            last = true;
+          }
+          const double fp = std::max(t, 1e-12) * r.pixel_angle_ / r.geo_.voxel_size / r.extent_ * r.lod_ratio_;
+          const double lam = std::log(1.0 / (double(r.m_) * fp)) / std::log(double(n));
+          const double dt_unit = r.step_ * std::max(fp, fine_voxel);
+          const double dt = dt_unit / unit_per_t;
+          unit_point(ray, t, p);
+          ++counters.samples;
+          if (iso) {
+            const float v = sample(lv, lam, p, nullptr);
+            if (s.have_prev && crossing(s.prev_value, v)) {
+              hit_t = refine_hit(ray, lv, lam, s.prev_t, t, s.prev_value, v);
+              finished = true;
+              break;
+            }
+            s.prev_value = v, s.prev_t = t, s.have_prev = true;
+          } else {
+            Vec3d g(0.0);
+            const float v = sample(lv, lam, p, gradients ? &g : nullptr);
+            if (s.have_prev) {
+              const double seg = std::min(dt, t - s.prev_t);
+              Vec3f col;
+              float a;
+              r.preintegrated_.segment(s.prev_value, v, seg * unit_per_t / r.finest_voxel_unit_, col, a);
+              if (a > 0) composite(s, px, col, a, t, g, ray);
+              if (s.alpha >= stop) {
+                finished = true;
+                break;
+              }
+            }
+            s.prev_value = v, s.prev_t = t, s.have_prev = true;
+          }
+          t += dt;
+        }
+        if (finished) break;
+        t = std::max(t, t_exit);
+      }
+      s.status = RayState::done;
+      if (iso) {
+        if (hit_t == kInf) return;
+        finish_iso(ray, hit_t, px);
+      } else {
+        px.color = Vec3f(s.accum + Vec3d(r.scene_.background) * (1 - s.alpha));
+        px.alpha = float(s.alpha);
+      }
+    }
+
+    int first_crossed(float a, float b) const {
+      for (size_t k = 0; k < r.scene_.isosurfaces.size(); ++k) {
+        const double ga = a - r.scene_.isosurfaces[k].value, gb = b - r.scene_.isosurfaces[k].value;
+        if ((ga < 0) != (gb < 0) || gb == 0) return int(k);
+      }
+      return 0;
+    }
+
+    bool crossing(float a, float b) const {
+      for (const auto& surface : r.scene_.isosurfaces) {
+        const double ga = a - surface.value, gb = b - surface.value;
+        if ((ga < 0) != (gb < 0) || gb == 0) return true;
+      }
+      return false;
+    }
+
+    double refine_hit(const PrimaryRay& ray, const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
+      // The first surface crossed between the two samples.
+      double best = t1;
+      for (const auto& surface : r.scene_.isosurfaces) {
+        const double g0 = v0 - surface.value, g1 = v1 - surface.value;
+        if (!((g0 < 0) != (g1 < 0) || g1 == 0)) continue;
+        const double iso = surface.value;
+        const double th = bisect_crossing(
+            [&](double m) {
+              ++counters.samples;
+              double p[3];
+              unit_point(ray, m, p);
+              return double(sample(lv, lambda, p, nullptr)) - iso;
+            },
+            t0, t1, g0, g1, r.p_.refine);
+        if (th < best) best = th, hit_surface = int(&surface - r.scene_.isosurfaces.data());
+      }
+      hit_levels = lv;
+      hit_lambda = lambda;
+      return best;
+    }
+
+    void finish_iso(const PrimaryRay& ray, double hit_t, PixelResult& px) {
+      px.depth = hit_t;
+      px.alpha = 1;
+      const int surface = std::max(0, hit_surface);
+      px.color = r.scene_.isosurfaces[size_t(surface)].color;
+      if (!gradients) return;
+      Vec3d g(0.0);
+      if (hit_levels.count > 0) {
+        double p[3];
+        unit_point(ray, hit_t, p);
+        sample(hit_levels, hit_lambda, p, &g);
+      } else if (face_axis >= 0) {
+        g[face_axis] = ray.dir[face_axis] > 0 ? 1.0 : -1.0;  // the value rises into the region entered
+      }
+      // Unit-cube gradient to world: unit = voxel / extent, voxel = world / spacing.
+      ++counters.gradients;
+      const Vec3d n = facing_normal(g / (r.geo_.spacing * r.extent_), ray.world.dir);
+      if (setup.outputs.normals) px.normal = n;
+      if (!r.shading_.lit()) return;
+      double light_distance;
+      const Vec3d l = r.shading_.to_light(ray.world.at(hit_t), setup.camera.eye, light_distance);
+      px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
+    }
+
+    void composite(RayState& s, PixelResult& px, Vec3f c, double a, double t, const Vec3d& gradient, const PrimaryRay& ray) {
+      Vec3d n(0.0);
+      if (gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0)) {
+        ++counters.gradients;
+        n = facing_normal(gradient / (r.geo_.spacing * r.extent_), ray.world.dir);
+      }
+      if (r.shading_.lit()) {
+        double light_distance;
+        c = r.shading_.shade(c, n, -ray.world.dir, r.shading_.to_light(ray.world.at(t), setup.camera.eye, light_distance), false);
+      }
+      s.accum += Vec3d(c) * ((1 - s.alpha) * a);
+      s.alpha += (1 - s.alpha) * a;
+      if (px.depth == kInf && s.alpha >= 0.5) {
+        px.depth = t;
+        if (setup.outputs.normals) px.normal = n;
+      }
+    }
+
+    int hit_surface = -1;
+    int face_axis = -1;
+    Levels hit_levels;
+    double hit_lambda = 0;
+  };
+
+  const RenderContext& ctx_;
+  const Scene& scene_;
+  const VolumeGeometry& geo_;
+  GigaVoxelsParams p_;
+  ShadingModel shading_;
+  std::unique_ptr<Source> source_;
+  NodeTree tree_;
+  std::optional<float> outside_value_;  // the value outside the volume, where it is defined
+  double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1, pixel_angle_ = 0;
+  int n_ = 2, m_ = 32;
+  gigavoxels::PreintegratedTf preintegrated_;
+
+  // Per frame: the feedback buffer and the rays' states, written by the render threads (each
+  // pixel by one thread), read by the loader between passes.
+  uint64_t frame_ = 0;
+  std::unique_ptr<gigavoxels::UseBuffer> uses_;
+  mutable std::vector<RayState> states_;
+  bool allow_interrupt_ = false;
+  gigavoxels::Compactor compactor_;
+  std::vector<uint32_t> used_list_, request_list_;
+  std::vector<float> scratch_;
+  std::unordered_map<uint64_t, uint32_t> shared_;  // instanced brick id -> slot
+  gigavoxels::CompactionReport compaction_;
+  uint64_t passes_ = 0, interrupted_ = 0, frame_subdivisions_ = 0, frame_uploads_ = 0, frame_requests_ = 0, frame_uses_ = 0;
+  uint64_t last_pass_progress_ = 0, last_pass_requests_ = 0;
+  int stalled_frames_ = 0;
+  double loader_seconds_ = 0;
+};
+
+}  // namespace
+
+BackendEntry gigavoxels_backend() {
+  BackendEntry e;
+  e.info.name = "gigavoxels";
+  e.info.description = "Crassin et al. 2009: N^3-tree with node and brick pools under LRU, kd-restart cone-footprint "
+                       "traversal with quadrilinear mipmap filtering, ray-guided feedback and loading, procedural bricks";
+  e.info.kinds = {DataKind::structured};
+  e.info.modes = {RenderMode::iso, RenderMode::dvr};
+  e.info.params = {
+      {"lod_ratio", 0, 0, 1000, "target pixels per voxel; 0: the scene's quality.lod_ratio"},
+      {"step", 0.5, 1e-3, 16, "sampling step in voxels of the level sampled (times quality.step_factor; DVR: / sampling_rate)"},
+      {"exact", 0, 0, 1, "1: exact mode (rays stop at missing data and resume once it is loaded, until the frame is complete); "
+                         "0: approximate (coarser data meanwhile, converges over frames)"},
+      {"quadrilinear", 1, 0, 1, "1: blend the two mip levels around the footprint; 0: the nearest finer level only"},
+      {"slots_per_pixel", 4, 1, 16, "feedback list length per ray (shared by the rays of a 2x2 packet)"},
+      {"subdivide_budget", 512, 1, 1e6, "node subdivisions per frame"},
+      {"upload_budget", 512, 1, 1e6, "bricks written into the brick pool per frame"},
+      {"brick_slots", 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds"},
+      {"node_blocks", 0, 0, 1 << 22, "node pool blocks of N^3 nodes; 0: twice the brick slots"},
+      {"source", 0, 0, 1, "0: the store; 1: an instanced Menger sponge (N = 3) filling the volume's box"},
+      {"menger_brick", 27, 9, 81, "source=1: brick size M (9, 27 or 81)"},
+      {"max_passes", 256, 1, 100000, "exact mode: passes per frame before the rest of the frame takes coarser data"},
+      {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
+  };
+  e.info.quality_param = "lod_ratio";
+  e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
+  e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
+    if (ctx.scene().shading.casts_shadows())
+      throw Error(Errc::unsupported, "gigavoxels casts no shadow rays").with_file(ctx.scene().file).with_field("shading.shadows");
+    GigaVoxelsParams gp;
+    gp.lod_ratio = p["lod_ratio"];
+    gp.step = p["step"];
+    gp.exact = p["exact"] != 0;
+    gp.quadrilinear = p["quadrilinear"] != 0;
+    gp.slots_per_pixel = int(p["slots_per_pixel"]);
+    gp.subdivide_budget = int(p["subdivide_budget"]);
+    gp.upload_budget = int(p["upload_budget"]);
+    gp.brick_slots = uint32_t(p["brick_slots"]);
+    gp.node_blocks = uint32_t(p["node_blocks"]);
+    gp.source = int(p["source"]);
+    gp.menger_brick = int(p["menger_brick"]);
+    gp.max_passes = int(p["max_passes"]);
+    gp.refine = int(p["refine"]);
+    return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
+      using Stored = decltype(stored);
+      std::unique_ptr<Source> source;
+      if (gp.source == 1) {
+        source = std::make_unique<ProducerSource>(std::make_unique<gigavoxels::MengerProducer>(gp.menger_brick), true);
+      } else {
+        source = std::make_unique<StoreSource<Stored>>(ctx);
+      }
+      return std::make_unique<GigaVoxelsRenderer<Stored>>(ctx, gp, std::move(source));
+    });
+  };
+  return e;
+}
+
+}  // namespace brickyard

@@ -1,0 +1,253 @@
+// The `gigavoxels` back end: its pools' LRU replacement (never what the frame used, never the
+// root), exact mode against the reference, approximate mode converging to exact mode after a
+// camera jump, quadrilinear filtering against nearest-level sampling, and N = 3 on the
+// instanced Menger sponge.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+#include <string>
+
+#include <tbb/global_control.h>
+
+#include "preprocess/builder.h"
+#include "preprocess/volume_source.h"
+#include "renderers/common/metrics.h"
+#include "renderers/common/render.h"
+#include "renderers/common/scene.h"
+#include "renderers/gigavoxels/node_tree.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+using gigavoxels::kNoAddress;
+using gigavoxels::Node;
+using gigavoxels::NodeTree;
+
+TEST(GigaVoxelsNodeTree, LruNeverEvictsWhatTheFrameUsedNorTheRoot) {
+  // 1 + 4 blocks of 8 nodes, 1 + 3 bricks: far too small for what the frames below ask.
+  NodeTree tree(2, 5, 4, 8);
+  tree.set_root(Node::make_data(false), {});
+  tree.begin_feedback(1);
+  ASSERT_EQ(tree.allocate_brick(0), 0u);  // the root's brick: slot 0, always
+  const uint32_t a = tree.subdivide(0);
+  ASSERT_NE(a, kNoAddress);
+  for (int i = 0; i < 8; ++i) tree.set_node(a + uint32_t(i), Node::make_data(false));
+  const uint32_t b = tree.subdivide(a + 3);  // a grandchild block
+  ASSERT_NE(b, kNoAddress);
+  for (int i = 0; i < 8; ++i) tree.set_node(b + uint32_t(i), Node::make_data(false));
+  EXPECT_EQ(tree.address_of(b + 1).depth, 2);
+  EXPECT_EQ(tree.address_of(b + 1).x, 3);  // child 3 of the root is (1,1,0); its child 1 is (3,2,0)
+  EXPECT_EQ(tree.address_of(b + 1).y, 2);
+  const uint32_t s1 = tree.allocate_brick(b + 1);
+  ASSERT_NE(s1, kNoAddress);
+  tree.end_of_feedback();
+
+  // Frame 2 uses only the grandchild: its block, its parent's block and its brick must survive
+  // any number of allocations this frame; the others fail once everything else is taken.
+  tree.begin_feedback(2);
+  tree.mark_used(b + 1);
+  tree.end_of_feedback();
+  std::set<uint32_t> taken;
+  for (int i = 0; i < 10; ++i) {
+    const uint32_t c = tree.subdivide(a + 5);  // re-subdividing the same node: each call takes a fresh block
+    if (c == kNoAddress) break;
+    taken.insert(c / 8);
+    for (int k = 0; k < 8; ++k) tree.set_node(c + uint32_t(k), Node::make_data(true));
+  }
+  EXPECT_EQ(taken.count(a / 8), 0u);
+  EXPECT_EQ(taken.count(b / 8), 0u);
+  EXPECT_EQ(taken.size(), 2u);  // the two blocks nobody used
+  EXPECT_GT(tree.counters().failed_allocations, 0u);
+  for (int i = 0; i < 5; ++i) {
+    const uint32_t s = tree.allocate_brick(a + uint32_t(i));
+    EXPECT_NE(s, s1);
+    EXPECT_NE(s, 0u);
+  }
+  EXPECT_TRUE(tree.node(b + 1).has_brick());
+  EXPECT_EQ(tree.node(b + 1).brick(), s1);
+  EXPECT_TRUE(tree.node(0).has_children());
+  EXPECT_TRUE(tree.node(0).has_brick());
+  EXPECT_TRUE(tree.node(a + 3).has_children());
+
+  // Frame 3 uses nothing: the grandchild's block can now go, and its parent loses the pointer.
+  tree.begin_feedback(3);
+  tree.end_of_feedback();
+  for (int i = 0; i < 4; ++i) tree.subdivide(a + 6);
+  EXPECT_FALSE(tree.node(a + 3).has_children());
+  EXPECT_TRUE(tree.node(0).has_brick());
+}
+
+/// Marschner-Lobb 64^3 f32 in 8^3 bricks (4 levels), and a Menger sponge store.
+class GigaVoxels : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    BuildOptions o;
+    o.brick_size = 8;
+    auto ml = make_field_source(make_field("marschner-lobb"), {64, 64, 64}, ValueType::f32);
+    build_store(*ml, dir_->file("ml.store"), o);
+  }
+  static void TearDownTestSuite() { delete dir_; }
+
+  static Scene scene(const std::string& extra, int size = 64, const std::string& camera = kCamera) {
+    const std::string text = R"({"dataset": "ml.store", "image": {"width": )" + std::to_string(size) + R"(, "height": )" +
+                             std::to_string(size) + R"(}, "cache": {"l1": "64MiB", "l2": "64MiB"}, )" + camera + ", " + extra + "}";
+    return parse_scene(text, dir_->file("scene.json"));
+  }
+  static constexpr const char* kCamera = R"("camera": {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
+  static const std::string& iso() {
+    static const std::string s = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})";
+    return s;
+  }
+  static const std::string& dvr() {
+    static const std::string s = R"("mode": "dvr", "transfer_function": {"points": [
+        {"value": 0.55, "color": [0.2, 0.4, 0.9], "opacity": 0}, {"value": 0.8, "color": [0.9, 0.8, 0.3], "opacity": 0.3},
+        {"value": 1.0, "color": [1, 0.4, 0.2], "opacity": 0.6}]})";
+    return s;
+  }
+  static RenderSession::Options backend(const std::string& name, std::map<std::string, double> params = {}) {
+    RenderSession::Options o;
+    o.backend = name;
+    o.params = std::move(params);
+    return o;
+  }
+  static bool finite(const FrameBuffers& fb) {
+    for (size_t i = 0; i < fb.color.size(); ++i) {
+      const Rgbaf c = fb.color.data()[i];
+      if (!std::isfinite(c.r) || !std::isfinite(c.g) || !std::isfinite(c.b) || !std::isfinite(c.a)) return false;
+    }
+    return true;
+  }
+  static testing::TempDir* dir_;
+};
+testing::TempDir* GigaVoxels::dir_ = nullptr;
+
+const FrameOutputs kAll{.depth = true, .normals = true};
+
+TEST_F(GigaVoxels, ExactModeMatchesTheReferenceInOneFrame) {
+  // lod_ratio 0.25: every ray reaches the finest level, so what remains is the sampling error.
+  for (const std::string& mode : {iso(), dvr()}) {
+    const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.25})", 96);
+    RenderSession ref(sc, backend("reference"));
+    FrameBuffers truth, fb;
+    ref.render(0, truth, kAll);
+    const double voxel = ref.context().geometry().voxel_size;
+    RenderSession g(sc, backend("gigavoxels", {{"exact", 1}, {"step", 0.0625}, {"refine", 20}}));
+    const FrameStats st = g.render(0, fb, kAll);
+    EXPECT_TRUE(g.converged());
+    ASSERT_TRUE(finite(fb));
+    EXPECT_GT(st.backend_value("passes"), 1);  // the first pass found nothing loaded
+    RenderSession rm(sc, backend("raymarch", {{"step", 0.0625}, {"refine", 20}}));
+    FrameBuffers baseline;
+    rm.render(0, baseline, kAll);
+    const ImageError e = compare_frames(fb, truth, voxel);
+    const ImageError b = compare_frames(baseline, truth, voxel);
+    EXPECT_LT(e.rmse, 0.02) << e.to_json();
+    EXPECT_LE(e.rmse, 1.2 * b.rmse + 1e-3) << e.to_json() << b.to_json();
+    EXPECT_LT(e.coverage_mismatch_fraction, 0.005) << e.to_json();
+    if (sc.mode == RenderMode::iso) {
+      EXPECT_LT(e.depth_p99, 0.05) << e.to_json();
+      EXPECT_LT(e.normal_mean_deg, 2.0) << e.to_json();
+    }
+  }
+}
+
+TEST_F(GigaVoxels, ApproximateModeConvergesToExactModeAfterACameraJump) {
+  const std::string path = R"("camera_path": {"frames": 2, "fov_degrees": 35, "keyframes": [
+      {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45]}, {"eye": [-0.9, 1.9, -0.4], "target": [0.5, 0.5, 0.5]}]})";
+  const Scene sc = scene(iso() + R"(, "quality": {"lod_ratio": 0.5})", 64, path);
+  RenderSession exact(sc, backend("gigavoxels", {{"exact", 1}}));
+  FrameBuffers want, fb;
+  exact.render(1, want, kAll);
+  RenderSession approx(sc, backend("gigavoxels"));
+  approx.settle(0, kAll);
+  int frames = 0;
+  double rmse = 1;
+  for (; frames < 40 && rmse > 1e-6; ++frames) {
+    approx.render(1, fb, kAll);
+    ASSERT_TRUE(finite(fb));
+    approx.cache().wait_idle();
+    rmse = compare_frames(fb, want, 1.0).rmse;
+  }
+  EXPECT_LE(rmse, 1e-6);
+  EXPECT_LE(frames, 12) << "frames to converge after the jump";
+}
+
+TEST_F(GigaVoxels, QuadrilinearFilteringBeatsNearestLevelAgainstASupersampledReference) {
+  // Far enough that coarse levels are chosen, the reference supersampled 4x4 and box-filtered.
+  const std::string far = R"("camera": {"eye": [3.5, -2.4, 2.9], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
+  const Scene big = scene(dvr(), 128, far);
+  RenderSession ref(big, backend("reference"));
+  FrameBuffers hi;
+  ref.render(0, hi, {});
+  FrameBuffers truth(32, 32, {});
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) {
+      Rgbaf sum{0, 0, 0, 0};
+      for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+          const Rgbaf c = hi.color(4 * x + i, 4 * y + j);
+          sum.r += c.r / 16, sum.g += c.g / 16, sum.b += c.b / 16, sum.a += c.a / 16;
+        }
+      truth.color(x, y) = sum;
+    }
+  const Scene small = scene(dvr() + R"(, "quality": {"lod_ratio": 1})", 32, far);
+  double err[2];
+  for (int q = 0; q < 2; ++q) {
+    RenderSession g(small, backend("gigavoxels", {{"exact", 1}, {"quadrilinear", double(q)}, {"step", 0.25}}));
+    FrameBuffers fb;
+    g.render(0, fb, {});
+    err[q] = compare_frames(fb, truth, 1.0).rmse;
+  }
+  EXPECT_LT(err[1], err[0]) << "quadrilinear " << err[1] << " vs nearest level " << err[0];
+}
+
+TEST_F(GigaVoxels, ArityThreeRendersTheInstancedMengerSpongeFromOneBrick) {
+  // The volume's box holds the sponge (N = 3, M = 9): every non-empty node at every depth
+  // points to the one shared brick; the faces of the solid are surfaces (empty outside).
+  const Scene sc = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "values": "stored", "shading": {"light": "headlight"})", 64);
+  RenderSession g(sc, backend("gigavoxels", {{"source", 1}, {"menger_brick", 9}, {"exact", 1}}));
+  FrameBuffers fb;
+  const FrameStats st = g.render(0, fb, kAll);
+  ASSERT_TRUE(finite(fb));
+  EXPECT_TRUE(g.converged());
+  EXPECT_GT(st.backend_value("subdivisions"), 0);
+  EXPECT_EQ(st.backend_value("bricks_in_use"), 1);
+  int hits = 0;
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) hits += std::isfinite(fb.depth(x, y));
+  EXPECT_GT(hits, 500);
+  // Through the middle of a face lies the central tunnel, empty at every depth: a ray along
+  // the x axis through the centre of the box sees nothing.
+  const Scene through = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "values": "stored")", 8,
+                              R"("camera": {"eye": [-2, 0.5, 0.5], "target": [0.5, 0.5, 0.5], "up": [0, 0, 1], "fov_degrees": 1})");
+  RenderSession t(through, backend("gigavoxels", {{"source", 1}, {"menger_brick", 9}, {"exact", 1}}));
+  t.render(0, fb, kAll);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) EXPECT_FALSE(std::isfinite(fb.depth(x, y))) << x << "," << y;
+}
+
+TEST_F(GigaVoxels, TheImageDoesNotDependOnTheThreadCount) {
+  const Scene sc = scene(dvr() + R"(, "quality": {"lod_ratio": 0.5})", 48);
+  FrameBuffers a, b;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    RenderSession g(sc, backend("gigavoxels", {{"exact", 1}}));
+    g.render(0, a, kAll);
+  }
+  {
+    tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+    RenderSession g(sc, backend("gigavoxels", {{"exact", 1}}));
+    g.render(0, b, kAll);
+  }
+  for (size_t i = 0; i < a.color.size(); ++i) {
+    ASSERT_EQ(a.color.data()[i].r, b.color.data()[i].r) << i;
+    ASSERT_EQ(a.color.data()[i].a, b.color.data()[i].a) << i;
+  }
+}
+
+}  // namespace
+}  // namespace brickyard
