@@ -46,8 +46,10 @@ inline constexpr int kMaxSlotsPerPixel = 16;
 class UseBuffer;
 
 /// @brief Records one ray's node uses and its request, then writes its share into the packet's
-/// slots at finish(). Not thread-safe; cheap to create (no allocation unless the ray's share
-/// outgrows an inline buffer, and then a per-thread pooled vector is reused).
+/// slots at finish(). Not thread-safe; cheap to create. It buffers only its own rank's part of
+/// every window (L / 4 entries), inline up to 64 (lists up to 256 nodes with K = 4), beyond that
+/// in a vector taken from a per-thread pool and given back on destruction: no allocation per ray
+/// once the pool is warm.
 class RayRecorder {
  public:
   RayRecorder(RayRecorder&& other) noexcept;
