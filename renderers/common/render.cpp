@@ -115,6 +115,10 @@ RenderSession::RenderSession(const Scene& scene, const Options& options)
                                                     entry_->info.name, to_string(scene_.mode)))
         .with_file(scene_.file)
         .with_field("mode");
+  if (scene_.shading.casts_shadows() && !entry_->info.shadows)
+    throw Error(Errc::unsupported, fmt::format("{} casts no shadow rays", entry_->info.name))
+        .with_file(scene_.file)
+        .with_field("shading.shadows");
   store_ = std::make_unique<BrickStore>(scene_.dataset);
   normalize_values(scene_, store_->manifest().min_value, store_->manifest().max_value);
   build();

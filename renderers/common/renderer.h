@@ -42,6 +42,7 @@ struct BackendInfo {
   std::string description;
   std::vector<DataKind> kinds;
   std::vector<RenderMode> modes;
+  bool shadows = false;  ///< casts shadow rays (scenes with `shading.shadows` need it)
   std::vector<BackendParam> params;
   /// The parameter `brickyard bench` sweeps, and its default sweep from fast to accurate.
   std::string quality_param;

@@ -170,11 +170,19 @@ class UseBuffer {
 /// @brief What compaction did to one stream: slots = empty + local_duplicates + out.
 struct CompactionStats {
   uint64_t slots = 0, empty = 0, local_duplicates = 0, out = 0;
+  CompactionStats& operator+=(const CompactionStats& o) {
+    slots += o.slots, empty += o.empty, local_duplicates += o.local_duplicates, out += o.out;
+    return *this;
+  }
 };
 
 /// @brief Both streams: the use list and the request list.
 struct CompactionReport {
   CompactionStats uses, requests;
+  CompactionReport& operator+=(const CompactionReport& o) {
+    uses += o.uses, requests += o.requests;
+    return *this;
+  }
 };
 
 /// @brief Compacts a frame's UseBuffer into the unique-ish lists the loader reads, keeping its

@@ -147,6 +147,7 @@ class GigaVoxelsRenderer final : public Renderer {
         tree_(source_->arity(), node_blocks(ctx, p, *source_), brick_slots(ctx, p, *source_), source_->brick_size()) {
     lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
     n_ = source_->arity();
+    inv_log_arity_ = 1.0 / std::log(double(n_));
     m_ = source_->brick_size();
     // The tree's unit cube in finest voxel-edge coordinates: the root brick's extent for a
     // store (its levels halve up to one brick), the volume's box for a producer.
@@ -180,8 +181,8 @@ class GigaVoxelsRenderer final : public Renderer {
     uses_->begin_frame(frame_);
     states_.assign(size_t(setup.width) * size_t(setup.height), RayState{});
     allow_interrupt_ = p_.exact;
-    const double ty = std::tan(setup.camera.fov_degrees * kPi / 360.0);
-    pixel_angle_ = 2 * ty / double(setup.height);
+    const double pixel_angle = 2 * std::tan(setup.camera.fov_degrees * kPi / 360.0) / double(setup.height);
+    footprint_per_t_ = pixel_angle / geo_.voxel_size / extent_ * lod_ratio_;
   }
 
   void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
@@ -285,10 +286,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
   void serve_feedback() {
     const gigavoxels::CompactionReport report = compactor_.compact(*uses_, used_list_, request_list_);
-    compaction_.uses.slots += report.uses.slots, compaction_.uses.empty += report.uses.empty;
-    compaction_.uses.local_duplicates += report.uses.local_duplicates, compaction_.uses.out += report.uses.out;
-    compaction_.requests.slots += report.requests.slots, compaction_.requests.empty += report.requests.empty;
-    compaction_.requests.local_duplicates += report.requests.local_duplicates, compaction_.requests.out += report.requests.out;
+    compaction_ += report;
     frame_uses_ += used_list_.size();
     frame_requests_ += request_list_.size();
     last_pass_requests_ = request_list_.size();
@@ -419,6 +417,11 @@ class GigaVoxelsRenderer final : public Renderer {
       if (s.status == RayState::done) write_pixel(out, x, y, px);
     }
 
+    /// A pixel's footprint at distance t, in unit coordinates, scaled by lod_ratio.
+    double footprint(double t) const { return std::max(t, 1e-12) * r.footprint_per_t_; }
+    /// The (fractional) depth whose voxels are as large as a footprint.
+    double depth_for(double footprint) const { return std::log(1.0 / (double(r.m_) * footprint)) * r.inv_log_arity_; }
+
     /// The ray's position in the tree's unit cube.
     void unit_point(const PrimaryRay& ray, double t, double p[3]) const {
       for (int a = 0; a < 3; ++a) p[a] = (ray.org[a] + 0.5 + ray.dir[a] * t) / r.extent_;
@@ -438,9 +441,7 @@ class GigaVoxelsRenderer final : public Renderer {
       while (t < ray.span.t1) {
         double p[3];
         unit_point(ray, t, p);
-        // Footprint of a pixel at t, in unit coordinates, and the depth whose voxels match it.
-        const double footprint = std::max(t, 1e-12) * r.pixel_angle_ / r.geo_.voxel_size / r.extent_ * r.lod_ratio_;
-        const double lambda = std::log(1.0 / (double(r.m_) * footprint)) / std::log(double(n));
+        const double lambda = depth_for(footprint(t));
         // kd-restart descent.
         Levels lv;
         uint32_t address = 0;
@@ -538,8 +539,8 @@ class GigaVoxelsRenderer final : public Renderer {
             t = t_face;
             last = true;
           }
-          const double fp = std::max(t, 1e-12) * r.pixel_angle_ / r.geo_.voxel_size / r.extent_ * r.lod_ratio_;
-          const double lam = std::log(1.0 / (double(r.m_) * fp)) / std::log(double(n));
+          const double fp = footprint(t);
+          const double lam = depth_for(fp);
           const double dt_unit = r.step_ * std::max(fp, fine_voxel);
           const double dt = dt_unit / unit_per_t;
           unit_point(ray, t, p);
@@ -677,7 +678,9 @@ class GigaVoxelsRenderer final : public Renderer {
   std::unique_ptr<Source> source_;
   NodeTree tree_;
   std::optional<float> outside_value_;  // the value outside the volume, where it is defined
-  double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1, pixel_angle_ = 0;
+  double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1;
+  double footprint_per_t_ = 0;  // a pixel's footprint per unit distance, unit coordinates, times lod_ratio
+  double inv_log_arity_ = 1;
   int n_ = 2, m_ = 32;
   gigavoxels::PreintegratedTf preintegrated_;
 
@@ -726,8 +729,6 @@ BackendEntry gigavoxels_backend() {
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
-    if (ctx.scene().shading.casts_shadows())
-      throw Error(Errc::unsupported, "gigavoxels casts no shadow rays").with_file(ctx.scene().file).with_field("shading.shadows");
     GigaVoxelsParams gp;
     gp.lod_ratio = p["lod_ratio"];
     gp.step = p["step"];

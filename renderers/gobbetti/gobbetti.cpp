@@ -659,8 +659,6 @@ BackendEntry gobbetti_backend() {
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
-    if (ctx.scene().shading.casts_shadows())
-      throw Error(Errc::unsupported, "gobbetti casts no shadow rays").with_file(ctx.scene().file).with_field("shading.shadows");
     GobbettiParams gp;
     gp.lod_ratio = p["lod_ratio"];
     gp.step = p["step"];

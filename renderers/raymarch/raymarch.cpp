@@ -250,6 +250,7 @@ BackendEntry raymarch_backend() {
                        "empty-space skipping by the node table";
   e.info.kinds = {DataKind::structured};
   e.info.modes = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
+  e.info.shadows = true;
   e.info.params = {
       {"step", 0.5, 1e-3, 16.0, "sampling step in voxels (times the scene's quality.step_factor; DVR/MIP: divided by sampling_rate)"},
       {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing between two samples"},

@@ -17,10 +17,16 @@
 #include "renderers/common/render.h"
 #include "renderers/common/scene.h"
 #include "renderers/gigavoxels/node_tree.h"
+#include "renderers/render_test_util.h"
 #include "test_util.h"
 
 namespace brickyard {
 namespace {
+
+using testing::all_finite;
+using testing::backend_options;
+using testing::dvr_scene;
+using testing::iso_scene;
 
 using gigavoxels::kNoAddress;
 using gigavoxels::Node;
@@ -98,29 +104,6 @@ class GigaVoxels : public ::testing::Test {
     return parse_scene(text, dir_->file("scene.json"));
   }
   static constexpr const char* kCamera = R"("camera": {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
-  static const std::string& iso() {
-    static const std::string s = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})";
-    return s;
-  }
-  static const std::string& dvr() {
-    static const std::string s = R"("mode": "dvr", "transfer_function": {"points": [
-        {"value": 0.55, "color": [0.2, 0.4, 0.9], "opacity": 0}, {"value": 0.8, "color": [0.9, 0.8, 0.3], "opacity": 0.3},
-        {"value": 1.0, "color": [1, 0.4, 0.2], "opacity": 0.6}]})";
-    return s;
-  }
-  static RenderSession::Options backend(const std::string& name, std::map<std::string, double> params = {}) {
-    RenderSession::Options o;
-    o.backend = name;
-    o.params = std::move(params);
-    return o;
-  }
-  static bool finite(const FrameBuffers& fb) {
-    for (size_t i = 0; i < fb.color.size(); ++i) {
-      const Rgbaf c = fb.color.data()[i];
-      if (!std::isfinite(c.r) || !std::isfinite(c.g) || !std::isfinite(c.b) || !std::isfinite(c.a)) return false;
-    }
-    return true;
-  }
   static testing::TempDir* dir_;
 };
 testing::TempDir* GigaVoxels::dir_ = nullptr;
@@ -129,18 +112,18 @@ const FrameOutputs kAll{.depth = true, .normals = true};
 
 TEST_F(GigaVoxels, ExactModeMatchesTheReferenceInOneFrame) {
   // lod_ratio 0.25: every ray reaches the finest level, so what remains is the sampling error.
-  for (const std::string& mode : {iso(), dvr()}) {
+  for (const std::string& mode : {iso_scene(), dvr_scene()}) {
     const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.25})", 96);
-    RenderSession ref(sc, backend("reference"));
+    RenderSession ref(sc, backend_options("reference"));
     FrameBuffers truth, fb;
     ref.render(0, truth, kAll);
     const double voxel = ref.context().geometry().voxel_size;
-    RenderSession g(sc, backend("gigavoxels", {{"exact", 1}, {"step", 0.0625}, {"refine", 20}}));
+    RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}, {"step", 0.0625}, {"refine", 20}}));
     const FrameStats st = g.render(0, fb, kAll);
     EXPECT_TRUE(g.converged());
-    ASSERT_TRUE(finite(fb));
+    ASSERT_TRUE(all_finite(fb));
     EXPECT_GT(st.backend_value("passes"), 1);  // the first pass found nothing loaded
-    RenderSession rm(sc, backend("raymarch", {{"step", 0.0625}, {"refine", 20}}));
+    RenderSession rm(sc, backend_options("raymarch", {{"step", 0.0625}, {"refine", 20}}));
     FrameBuffers baseline;
     rm.render(0, baseline, kAll);
     const ImageError e = compare_frames(fb, truth, voxel);
@@ -158,17 +141,17 @@ TEST_F(GigaVoxels, ExactModeMatchesTheReferenceInOneFrame) {
 TEST_F(GigaVoxels, ApproximateModeConvergesToExactModeAfterACameraJump) {
   const std::string path = R"("camera_path": {"frames": 2, "fov_degrees": 35, "keyframes": [
       {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45]}, {"eye": [-0.9, 1.9, -0.4], "target": [0.5, 0.5, 0.5]}]})";
-  const Scene sc = scene(iso() + R"(, "quality": {"lod_ratio": 0.5})", 64, path);
-  RenderSession exact(sc, backend("gigavoxels", {{"exact", 1}}));
+  const Scene sc = scene(iso_scene() + R"(, "quality": {"lod_ratio": 0.5})", 64, path);
+  RenderSession exact(sc, backend_options("gigavoxels", {{"exact", 1}}));
   FrameBuffers want, fb;
   exact.render(1, want, kAll);
-  RenderSession approx(sc, backend("gigavoxels"));
+  RenderSession approx(sc, backend_options("gigavoxels"));
   approx.settle(0, kAll);
   int frames = 0;
   double rmse = 1;
   for (; frames < 40 && rmse > 1e-6; ++frames) {
     approx.render(1, fb, kAll);
-    ASSERT_TRUE(finite(fb));
+    ASSERT_TRUE(all_finite(fb));
     approx.cache().wait_idle();
     rmse = compare_frames(fb, want, 1.0).rmse;
   }
@@ -179,8 +162,8 @@ TEST_F(GigaVoxels, ApproximateModeConvergesToExactModeAfterACameraJump) {
 TEST_F(GigaVoxels, QuadrilinearFilteringBeatsNearestLevelAgainstASupersampledReference) {
   // Far enough that coarse levels are chosen, the reference supersampled 4x4 and box-filtered.
   const std::string far = R"("camera": {"eye": [3.5, -2.4, 2.9], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
-  const Scene big = scene(dvr(), 128, far);
-  RenderSession ref(big, backend("reference"));
+  const Scene big = scene(dvr_scene(), 128, far);
+  RenderSession ref(big, backend_options("reference"));
   FrameBuffers hi;
   ref.render(0, hi, {});
   FrameBuffers truth(32, 32, {});
@@ -194,10 +177,10 @@ TEST_F(GigaVoxels, QuadrilinearFilteringBeatsNearestLevelAgainstASupersampledRef
         }
       truth.color(x, y) = sum;
     }
-  const Scene small = scene(dvr() + R"(, "quality": {"lod_ratio": 1})", 32, far);
+  const Scene small = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 1})", 32, far);
   double err[2];
   for (int q = 0; q < 2; ++q) {
-    RenderSession g(small, backend("gigavoxels", {{"exact", 1}, {"quadrilinear", double(q)}, {"step", 0.25}}));
+    RenderSession g(small, backend_options("gigavoxels", {{"exact", 1}, {"quadrilinear", double(q)}, {"step", 0.25}}));
     FrameBuffers fb;
     g.render(0, fb, {});
     err[q] = compare_frames(fb, truth, 1.0).rmse;
@@ -209,10 +192,10 @@ TEST_F(GigaVoxels, ArityThreeRendersTheInstancedMengerSpongeFromOneBrick) {
   // The volume's box holds the sponge (N = 3, M = 9): every non-empty node at every depth
   // points to the one shared brick; the faces of the solid are surfaces (empty outside).
   const Scene sc = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "values": "stored", "shading": {"light": "headlight"})", 64);
-  RenderSession g(sc, backend("gigavoxels", {{"source", 1}, {"menger_brick", 9}, {"exact", 1}}));
+  RenderSession g(sc, backend_options("gigavoxels", {{"source", 1}, {"menger_brick", 9}, {"exact", 1}}));
   FrameBuffers fb;
   const FrameStats st = g.render(0, fb, kAll);
-  ASSERT_TRUE(finite(fb));
+  ASSERT_TRUE(all_finite(fb));
   EXPECT_TRUE(g.converged());
   EXPECT_GT(st.backend_value("subdivisions"), 0);
   EXPECT_EQ(st.backend_value("bricks_in_use"), 1);
@@ -224,23 +207,23 @@ TEST_F(GigaVoxels, ArityThreeRendersTheInstancedMengerSpongeFromOneBrick) {
   // the x axis through the centre of the box sees nothing.
   const Scene through = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "values": "stored")", 8,
                               R"("camera": {"eye": [-2, 0.5, 0.5], "target": [0.5, 0.5, 0.5], "up": [0, 0, 1], "fov_degrees": 1})");
-  RenderSession t(through, backend("gigavoxels", {{"source", 1}, {"menger_brick", 9}, {"exact", 1}}));
+  RenderSession t(through, backend_options("gigavoxels", {{"source", 1}, {"menger_brick", 9}, {"exact", 1}}));
   t.render(0, fb, kAll);
   for (int y = 0; y < 8; ++y)
     for (int x = 0; x < 8; ++x) EXPECT_FALSE(std::isfinite(fb.depth(x, y))) << x << "," << y;
 }
 
 TEST_F(GigaVoxels, TheImageDoesNotDependOnTheThreadCount) {
-  const Scene sc = scene(dvr() + R"(, "quality": {"lod_ratio": 0.5})", 48);
+  const Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.5})", 48);
   FrameBuffers a, b;
   {
     tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-    RenderSession g(sc, backend("gigavoxels", {{"exact", 1}}));
+    RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}}));
     g.render(0, a, kAll);
   }
   {
     tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-    RenderSession g(sc, backend("gigavoxels", {{"exact", 1}}));
+    RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}}));
     g.render(0, b, kAll);
   }
   for (size_t i = 0; i < a.color.size(); ++i) {

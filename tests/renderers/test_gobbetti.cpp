@@ -14,10 +14,16 @@
 #include "renderers/common/metrics.h"
 #include "renderers/common/render.h"
 #include "renderers/common/scene.h"
+#include "renderers/render_test_util.h"
 #include "test_util.h"
 
 namespace brickyard {
 namespace {
+
+using testing::all_finite;
+using testing::backend_options;
+using testing::dvr_scene;
+using testing::iso_scene;
 
 /// Marschner-Lobb 64^3 f32 in 8^3 bricks (4 levels): detail everywhere, no constant bricks.
 class Gobbetti : public ::testing::Test {
@@ -40,31 +46,8 @@ class Gobbetti : public ::testing::Test {
         "camera": {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45], "fov_degrees": 35}, )" + extra + "}";
     return parse_scene(text, dir_->file("scene.json"));
   }
-  static const std::string& iso() {
-    static const std::string s = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})";
-    return s;
-  }
-  static const std::string& dvr() {
-    static const std::string s = R"("mode": "dvr", "transfer_function": {"points": [
-        {"value": 0.55, "color": [0.2, 0.4, 0.9], "opacity": 0}, {"value": 0.8, "color": [0.9, 0.8, 0.3], "opacity": 0.3},
-        {"value": 1.0, "color": [1, 0.4, 0.2], "opacity": 0.6}]})";
-    return s;
-  }
 
-  static RenderSession::Options backend(const std::string& name, std::map<std::string, double> params = {}) {
-    RenderSession::Options o;
-    o.backend = name;
-    o.params = std::move(params);
-    return o;
-  }
 
-  static bool finite(const FrameBuffers& fb) {
-    for (size_t i = 0; i < fb.color.size(); ++i) {
-      const Rgbaf c = fb.color.data()[i];
-      if (!std::isfinite(c.r) || !std::isfinite(c.g) || !std::isfinite(c.b) || !std::isfinite(c.a)) return false;
-    }
-    return true;
-  }
 
   static testing::TempDir* dir_;
 };
@@ -73,7 +56,7 @@ testing::TempDir* Gobbetti::dir_ = nullptr;
 const FrameOutputs kAll{.depth = true, .normals = true};
 
 TEST_F(Gobbetti, FirstFrameRequestsTheRootAndConvergesOverFrames) {
-  RenderSession s(scene(iso()), backend("gobbetti"));
+  RenderSession s(scene(iso_scene()), backend_options("gobbetti"));
   FrameBuffers fb;
   s.render(0, fb, kAll);
   EXPECT_FALSE(s.converged());  // the root was not resident: requested, nothing drawn yet
@@ -85,17 +68,17 @@ TEST_F(Gobbetti, FirstFrameRequestsTheRootAndConvergesOverFrames) {
 TEST_F(Gobbetti, WithAnAmplePoolAndASettledCameraMatchesTheReference) {
   // At lod_ratio 0.25 every leaf on screen is at the finest level, so what remains is the
   // sampling error of fixed steps: as small as the baseline's at the same step, and small.
-  for (const std::string& mode : {iso(), dvr()}) {
+  for (const std::string& mode : {iso_scene(), dvr_scene()}) {
     const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.25})", 96);
-    RenderSession ref(sc, backend("reference"));
+    RenderSession ref(sc, backend_options("reference"));
     FrameBuffers truth, fb, baseline;
     ref.render(0, truth, kAll);
     const double voxel = ref.context().geometry().voxel_size;
-    RenderSession g(sc, backend("gobbetti", {{"step", 0.03125}, {"refine", 20}}));
+    RenderSession g(sc, backend_options("gobbetti", {{"step", 0.03125}, {"refine", 20}}));
     g.settle(0, kAll);
     const FrameStats st = g.render(0, fb, kAll);
-    ASSERT_TRUE(finite(fb));
-    RenderSession rm(sc, backend("raymarch", {{"step", 0.03125}, {"refine", 20}}));
+    ASSERT_TRUE(all_finite(fb));
+    RenderSession rm(sc, backend_options("raymarch", {{"step", 0.03125}, {"refine", 20}}));
     rm.render(0, baseline, kAll);
     const ImageError e = compare_frames(fb, truth, voxel);
     const ImageError b = compare_frames(baseline, truth, voxel);
@@ -114,18 +97,18 @@ TEST_F(Gobbetti, WorkingSetNeverExceedsThePoolAndASmallPoolDegradesWithoutHoles)
   // A sphere (its coarse levels keep its shape) at full resolution, then with a pool of 12
   // slots of 10^3 f32 voxels (8^3 bricks with apron): far fewer than the finest cut needs.
   const std::string sphere_iso = R"("mode": "iso", "isosurfaces": [{"value": 0.0}], "quality": {"lod_ratio": 0.25})";
-  RenderSession ample(scene(sphere_iso, 64, "64MiB", "sphere.store"), backend("gobbetti"));
+  RenderSession ample(scene(sphere_iso, 64, "64MiB", "sphere.store"), backend_options("gobbetti"));
   ample.settle(0, kAll);
   FrameBuffers fine;
   const FrameStats fine_stats = ample.render(0, fine, kAll);
-  RenderSession tight(scene(sphere_iso, 64, "48000", "sphere.store"), backend("gobbetti"));
+  RenderSession tight(scene(sphere_iso, 64, "48000", "sphere.store"), backend_options("gobbetti"));
   ASSERT_LT(tight.cache().pool_slots(), fine_stats.backend_value("working_set"));
   FrameBuffers coarse;
   for (int f = 0; f < 30; ++f) {
     const FrameStats st = tight.render(0, coarse, kAll);
     tight.cache().wait_idle();
     EXPECT_LE(st.backend_value("working_set"), double(tight.cache().pool_slots()));
-    ASSERT_TRUE(finite(coarse));
+    ASSERT_TRUE(all_finite(coarse));
   }
   // Coarser, but no holes: wherever the full-resolution image shows the surface, so does the
   // coarse one (at a slightly different depth), and nearly nowhere else.
@@ -143,10 +126,10 @@ TEST_F(Gobbetti, WorkingSetNeverExceedsThePoolAndASmallPoolDegradesWithoutHoles)
 }
 
 TEST_F(Gobbetti, VisibilityFeedbackNeverCullsWhatTheImageShows) {
-  for (const std::string& mode : {iso(), dvr()}) {
+  for (const std::string& mode : {iso_scene(), dvr_scene()}) {
     const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.5})", 96);
-    RenderSession on(sc, backend("gobbetti", {{"visibility", 1}}));
-    RenderSession off(sc, backend("gobbetti", {{"visibility", 0}}));
+    RenderSession on(sc, backend_options("gobbetti", {{"visibility", 1}}));
+    RenderSession off(sc, backend_options("gobbetti", {{"visibility", 0}}));
     on.settle(0, kAll);
     off.settle(0, kAll);
     // Let every tile group be queried, then settle again.
@@ -167,8 +150,8 @@ TEST_F(Gobbetti, VisibilityFeedbackNeverCullsWhatTheImageShows) {
 }
 
 TEST_F(Gobbetti, TheImageDoesNotDependOnTheThreadCount) {
-  const Scene sc = scene(dvr());
-  RenderSession s(sc, backend("gobbetti", {{"visibility", 0}}));
+  const Scene sc = scene(dvr_scene());
+  RenderSession s(sc, backend_options("gobbetti", {{"visibility", 0}}));
   s.settle(0, kAll);
   FrameBuffers one, two;
   {
