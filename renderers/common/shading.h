@@ -21,6 +21,14 @@ class ShadingModel {
   bool lit() const { return s_.lit(); }
   /// @brief Unit vector from p towards the light, and the distance to it (infinite for
   /// directional lights). The headlight sits at the eye.
+  /// @brief to_light() at the point t along a primary ray (origin at the eye, unit direction).
+  /// The headlight lies exactly back along the ray: no difference of two nearly equal absolute
+  /// positions, which loses every bit at deep zoom.
+  Vec3d to_light_along(const Rayd& primary, double t, double& distance) const {
+    if (s_.light != LightKind::headlight) return to_light(primary.at(t), primary.org, distance);
+    distance = t;
+    return t > 0 ? -primary.dir : Vec3d(0, 0, 1);
+  }
   Vec3d to_light(const Vec3d& p, const Vec3d& eye, double& distance) const {
     switch (s_.light) {
       case LightKind::headlight: {

@@ -149,12 +149,19 @@ class GigaVoxelsRenderer final : public Renderer {
     n_ = source_->arity();
     inv_log_arity_ = 1.0 / std::log(double(n_));
     m_ = source_->brick_size();
-    // The tree's unit cube in finest voxel-edge coordinates: the root brick's extent for a
-    // store (its levels halve up to one brick), the volume's box for a producer.
+    // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
+    // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
+    // sponge, the volume's box (voxel centres 0 to dims - 1).
     const StoreLayout& layout = ctx.layout();
-    extent_ = p.source == 1 ? double(geo_.dims.x) : double(layout.brick_size) * double(int64_t(1) << layout.finest());
-    if (p.source == 1 && (geo_.dims.y != geo_.dims.x || geo_.dims.z != geo_.dims.x))
-      throw Error(Errc::unsupported, "gigavoxels source=menger needs a cubic volume (its box is the sponge)").with_file(ctx.cache().store().path());
+    if (p.source == 1) {
+      if (geo_.dims.y != geo_.dims.x || geo_.dims.z != geo_.dims.x || geo_.dims.x < 2)
+        throw Error(Errc::unsupported, "gigavoxels source=menger needs a cubic volume of at least 2 voxels per axis (its box is the sponge)")
+            .with_file(ctx.cache().store().path());
+      extent_ = double(geo_.dims.x - 1), unit_offset_ = 0;
+    } else {
+      extent_ = double(layout.brick_size) * double(int64_t(1) << layout.finest()), unit_offset_ = 0.5;
+    }
+    scales_ = node_scales(n_, source_->max_depth() + 1);
     if (p.source == 1) outside_value_ = 0.0f;
     if (scene_.mode == RenderMode::dvr) preintegrated_ = gigavoxels::PreintegratedTf(scene_.transfer_function);
     const double factor = scene_.mode == RenderMode::iso ? scene_.quality.step_factor
@@ -252,6 +259,26 @@ class GigaVoxelsRenderer final : public Renderer {
     return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
   }
 
+  /// N^depth for every depth up to max_depth, each as an unevaluated sum hi + lo of two
+  /// doubles: exact while N^depth < 2^106 (the integer fits 64 bits up to 3^40 and 2^63).
+  struct Scale {
+    double hi = 1, lo = 0;
+  };
+  static std::vector<Scale> node_scales(int n, int max_depth) {
+    std::vector<Scale> scales(size_t(max_depth) + 1);
+    uint64_t v = 1;
+    for (size_t d = 0; d < scales.size(); ++d) {
+      Scale& s = scales[d];
+      s.hi = double(v);  // below 2^64, so it converts back
+      const uint64_t h = uint64_t(s.hi);
+      s.lo = h <= v ? double(v - h) : -double(h - v);
+      if (d + 1 < scales.size() && v > std::numeric_limits<uint64_t>::max() / uint64_t(n))
+        throw Error(Errc::unsupported, fmt::format("gigavoxels: {}^depth overflows 64 bits before the source's max depth {}", n, max_depth));
+      v *= uint64_t(n);
+    }
+    return scales;
+  }
+
   Node node_for(const NodeContent& c, int depth) const {
     if (c.kind == NodeContent::constant) return Node::make_constant(c.value);
     return Node::make_data(depth >= source_->max_depth());
@@ -335,12 +362,23 @@ class GigaVoxelsRenderer final : public Renderer {
     bool have_prev = false;
   };
 
-  /// A brick as a sample sees it: the pool slot, its node's depth and origin.
+  /// A node as the ray sees it, in the node's own coordinates ([0, 1]^3 across the node): the
+  /// eye there and the ray's direction per unit t there. Deep zoom needs these: an absolute
+  /// unit-cube position has 53 bits, which is one voxel at depth 30 for N = 3, while the eye
+  /// relative to a node is computed exactly (see local_eye) and is small wherever the
+  /// footprint asks for that node's depth, so a sample is accurate to the last bit of
+  /// *relative* position at any depth the tree reaches.
+  struct NodeFrame {
+    double eye[3] = {};
+    double dir[3] = {};
+  };
+
+  /// A brick as a sample sees it: the pool slot, its node's depth and frame.
   struct LevelBrick {
     const float* data = nullptr;
     int depth = -1;
-    double scale = 1;    // N^depth
-    double origin[3] = {};  // node coordinates (c)
+    double scale = 1;  // N^depth, rounded (voxel sizes and gradients only)
+    NodeFrame frame;
   };
 
   struct Tracer {
@@ -352,14 +390,14 @@ class GigaVoxelsRenderer final : public Renderer {
     Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
         : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
-    /// Trilinear value (and gradient per unit coordinate) of a brick at a unit position.
-    float sample_brick(const LevelBrick& b, const double p[3], Vec3d* gradient) const {
+    /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t.
+    float sample_brick(const LevelBrick& b, double t, Vec3d* gradient) const {
       const int64_t e = r.m_ + 2;
       const float top = float(e - 1);
       int64_t cell[3];
       float u[3];
       for (int a = 0; a < 3; ++a) {
-        const float l = std::clamp(float((p[a] * b.scale - b.origin[a]) * double(r.m_) + 0.5), 0.0f, top);
+        const float l = std::clamp(float((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5), 0.0f, top);
         cell[a] = std::min<int64_t>(int64_t(l), e - 2);
         u[a] = l - float(cell[a]);
       }
@@ -381,18 +419,18 @@ class GigaVoxelsRenderer final : public Renderer {
     };
 
     /// Quadrilinear: the two levels around the footprint's depth lambda, among those collected.
-    float sample(const Levels& lv, double lambda, const double p[3], Vec3d* gradient) const {
+    float sample(const Levels& lv, double lambda, double t, Vec3d* gradient) const {
       const LevelBrick& fine = lv.b[lv.count - 1];
-      if (!r.p_.quadrilinear || lv.count == 1 || lambda >= fine.depth) return sample_brick(fine, p, gradient);
+      if (!r.p_.quadrilinear || lv.count == 1 || lambda >= fine.depth) return sample_brick(fine, t, gradient);
       int i = lv.count - 1;
       while (i > 0 && lv.b[i - 1].depth > lambda) --i;  // b[i] finer than lambda, b[i-1] coarser
-      if (i == 0) return sample_brick(lv.b[0], p, gradient);
+      if (i == 0) return sample_brick(lv.b[0], t, gradient);
       const LevelBrick& coarse = lv.b[i - 1];
       const LevelBrick& finer = lv.b[i];
       const double w = std::clamp((lambda - coarse.depth) / double(finer.depth - coarse.depth), 0.0, 1.0);
       Vec3d gc(0.0), gf(0.0);
-      const float vc = sample_brick(coarse, p, gradient ? &gc : nullptr);
-      const float vf = sample_brick(finer, p, gradient ? &gf : nullptr);
+      const float vc = sample_brick(coarse, t, gradient ? &gc : nullptr);
+      const float vf = sample_brick(finer, t, gradient ? &gf : nullptr);
       if (gradient) *gradient = gc * (1 - w) + gf * w;
       return float(vc * (1 - w) + vf * w);
     }
@@ -418,19 +456,33 @@ class GigaVoxelsRenderer final : public Renderer {
     }
 
     /// A pixel's footprint at distance t, in unit coordinates, scaled by lod_ratio.
-    double footprint(double t) const { return std::max(t, 1e-12) * r.footprint_per_t_; }
+    double footprint(double t) const { return std::max(t, 1e-300) * r.footprint_per_t_; }
     /// The (fractional) depth whose voxels are as large as a footprint.
     double depth_for(double footprint) const { return std::log(1.0 / (double(r.m_) * footprint)) * r.inv_log_arity_; }
 
-    /// The ray's position in the tree's unit cube.
-    void unit_point(const PrimaryRay& ray, double t, double p[3]) const {
-      for (int a = 0; a < 3; ++a) p[a] = (ray.org[a] + 0.5 + ray.dir[a] * t) / r.extent_;
+    /// The frame of node c at a depth. The eye's node coordinates e N^depth - c are computed
+    /// exactly before one rounding: e times the double-double N^depth by an error-free product
+    /// (fma), and the integer part subtracted in integers where doubles no longer hold c.
+    NodeFrame node_frame(int depth, const int64_t c[3]) const {
+      const Scale& s = r.scales_[size_t(depth)];
+      NodeFrame f;
+      for (int a = 0; a < 3; ++a) {
+        const double hi = eye[a] * s.hi;
+        const double lo = std::fma(eye[a], s.hi, -hi) + eye[a] * s.lo;
+        double whole;
+        if (std::abs(hi) < 0x1p53) whole = hi - double(c[a]);  // exact: both are multiples of ulp(hi)
+        else if (std::abs(hi) < 0x1p62) whole = double(int64_t(hi) - c[a]);  // hi is an integer here
+        else whole = hi - double(c[a]);  // an eye this far outside never descends this deep
+        f.eye[a] = whole + lo;
+        f.dir[a] = dir[a] * s.hi;
+      }
+      return f;
     }
 
     void march(const PrimaryRay& ray, RayState& s, gigavoxels::RayRecorder& rec, PixelResult& px) {
       const bool iso = r.scene_.mode == RenderMode::iso;
+      for (int a = 0; a < 3; ++a) eye[a] = (ray.org[a] + r.unit_offset_) / r.extent_, dir[a] = ray.dir[a] / r.extent_;
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
-      const double inv_dir[3] = {1.0 / (ray.dir[0] / r.extent_), 1.0 / (ray.dir[1] / r.extent_), 1.0 / (ray.dir[2] / r.extent_)};
       const double stop = r.scene_.quality.termination_opacity;
       const int n = r.n_;
       double t = s.t;
@@ -439,8 +491,6 @@ class GigaVoxelsRenderer final : public Renderer {
       bool requested = false;
       int exit_axis = -1;
       while (t < ray.span.t1) {
-        double p[3];
-        unit_point(ray, t, p);
         const double lambda = depth_for(footprint(t));
         // kd-restart descent.
         Levels lv;
@@ -449,10 +499,11 @@ class GigaVoxelsRenderer final : public Renderer {
         int depth = 0;
         double scale = 1;
         int64_t c[3] = {0, 0, 0};
+        NodeFrame frame = node_frame(0, c);
         uint32_t want = 0;
         for (;;) {
           ++counters.nodes;
-          if (node.has_brick()) lv.push({r.tree_.brick(node.brick()), depth, scale, {double(c[0]), double(c[1]), double(c[2])}});
+          if (node.has_brick()) lv.push({r.tree_.brick(node.brick()), depth, scale, frame});
           if (node.constant()) break;
           if (depth >= lambda) break;  // its voxels cover at most lod_ratio pixels
           if (!node.has_children()) {
@@ -461,7 +512,7 @@ class GigaVoxelsRenderer final : public Renderer {
           }
           int child = 0, stride = 1;
           for (int a = 0; a < 3; ++a, stride *= n) {
-            const int64_t ci = std::clamp<int64_t>(int64_t(std::floor(p[a] * scale * n)) - c[a] * n, 0, n - 1);
+            const int64_t ci = std::clamp<int64_t>(int64_t(std::floor((frame.eye[a] + frame.dir[a] * t) * n)), 0, n - 1);
             c[a] = c[a] * n + ci;
             child += int(ci) * stride;
           }
@@ -469,15 +520,15 @@ class GigaVoxelsRenderer final : public Renderer {
           node = r.tree_.node(address);
           ++depth;
           scale *= n;
+          frame = node_frame(depth, c);
         }
         if (!node.constant() && !node.has_brick()) want = kWantsBrick;
-        // The node's exit along the ray.
+        // The node's exit along the ray, in the node's frame.
         double t_exit = ray.span.t1;
         const int entry_axis = exit_axis;
         for (int a = 0; a < 3; ++a) {
-          if (!std::isfinite(inv_dir[a])) continue;
-          const double face = (double(c[a]) + (ray.dir[a] > 0 ? 1.0 : 0.0)) / scale;
-          const double ta = ((face * r.extent_ - 0.5 - ray.org[a]) / r.extent_) * inv_dir[a];
+          if (frame.dir[a] == 0) continue;
+          const double ta = ((frame.dir[a] > 0 ? 1.0 : 0.0) - frame.eye[a]) / frame.dir[a];
           if (ta < t_exit) t_exit = ta, exit_axis = a;
         }
         const double t_face = std::min(std::max(t_exit, t), ray.span.t1);
@@ -543,19 +594,18 @@ class GigaVoxelsRenderer final : public Renderer {
           const double lam = depth_for(fp);
           const double dt_unit = r.step_ * std::max(fp, fine_voxel);
           const double dt = dt_unit / unit_per_t;
-          unit_point(ray, t, p);
           ++counters.samples;
           if (iso) {
-            const float v = sample(lv, lam, p, nullptr);
+            const float v = sample(lv, lam, t, nullptr);
             if (s.have_prev && crossing(s.prev_value, v)) {
-              hit_t = refine_hit(ray, lv, lam, s.prev_t, t, s.prev_value, v);
+              hit_t = refine_hit(lv, lam, s.prev_t, t, s.prev_value, v);
               finished = true;
               break;
             }
             s.prev_value = v, s.prev_t = t, s.have_prev = true;
           } else {
             Vec3d g(0.0);
-            const float v = sample(lv, lam, p, gradients ? &g : nullptr);
+            const float v = sample(lv, lam, t, gradients ? &g : nullptr);
             if (s.have_prev) {
               const double seg = std::min(dt, t - s.prev_t);
               Vec3f col;
@@ -600,7 +650,7 @@ class GigaVoxelsRenderer final : public Renderer {
       return false;
     }
 
-    double refine_hit(const PrimaryRay& ray, const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
+    double refine_hit(const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
       // The first surface crossed between the two samples.
       double best = t1;
       for (const auto& surface : r.scene_.isosurfaces) {
@@ -610,9 +660,7 @@ class GigaVoxelsRenderer final : public Renderer {
         const double th = bisect_crossing(
             [&](double m) {
               ++counters.samples;
-              double p[3];
-              unit_point(ray, m, p);
-              return double(sample(lv, lambda, p, nullptr)) - iso;
+              return double(sample(lv, lambda, m, nullptr)) - iso;
             },
             t0, t1, g0, g1, r.p_.refine);
         if (th < best) best = th, hit_surface = int(&surface - r.scene_.isosurfaces.data());
@@ -630,9 +678,7 @@ class GigaVoxelsRenderer final : public Renderer {
       if (!gradients) return;
       Vec3d g(0.0);
       if (hit_levels.count > 0) {
-        double p[3];
-        unit_point(ray, hit_t, p);
-        sample(hit_levels, hit_lambda, p, &g);
+        sample(hit_levels, hit_lambda, hit_t, &g);
       } else if (face_axis >= 0) {
         g[face_axis] = ray.dir[face_axis] > 0 ? 1.0 : -1.0;  // the value rises into the region entered
       }
@@ -642,7 +688,7 @@ class GigaVoxelsRenderer final : public Renderer {
       if (setup.outputs.normals) px.normal = n;
       if (!r.shading_.lit()) return;
       double light_distance;
-      const Vec3d l = r.shading_.to_light(ray.world.at(hit_t), setup.camera.eye, light_distance);
+      const Vec3d l = r.shading_.to_light_along(ray.world, hit_t, light_distance);
       px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
     }
 
@@ -654,7 +700,7 @@ class GigaVoxelsRenderer final : public Renderer {
       }
       if (r.shading_.lit()) {
         double light_distance;
-        c = r.shading_.shade(c, n, -ray.world.dir, r.shading_.to_light(ray.world.at(t), setup.camera.eye, light_distance), false);
+        c = r.shading_.shade(c, n, -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);
       }
       s.accum += Vec3d(c) * ((1 - s.alpha) * a);
       s.alpha += (1 - s.alpha) * a;
@@ -664,6 +710,7 @@ class GigaVoxelsRenderer final : public Renderer {
       }
     }
 
+    double eye[3] = {}, dir[3] = {};  // the ray in the unit cube, per unit t
     int hit_surface = -1;
     int face_axis = -1;
     Levels hit_levels;
@@ -678,6 +725,8 @@ class GigaVoxelsRenderer final : public Renderer {
   std::unique_ptr<Source> source_;
   NodeTree tree_;
   std::optional<float> outside_value_;  // the value outside the volume, where it is defined
+  std::vector<Scale> scales_;  // N^depth
+  double unit_offset_ = 0.5;   // unit = (voxel + unit_offset) / extent
   double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1;
   double footprint_per_t_ = 0;  // a pixel's footprint per unit distance, unit coordinates, times lod_ratio
   double inv_log_arity_ = 1;
