@@ -19,6 +19,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <unordered_map>
 
@@ -59,8 +60,11 @@ struct GigaVoxelsParams {
   int upload_budget = 512;     // bricks written into the pool per frame
   uint32_t brick_slots = 0;    // 0: as many as the scene's L1 budget holds
   uint32_t node_blocks = 0;    // 0: twice the brick slots
-  int source = 0;              // 0 store, 1 Menger sponge (N = 3)
+  int source = 0;              // 0 store, 1 Menger sponge (N = 3), 2 the store amplified
   int menger_brick = 27;
+  int amplify_levels = 3;
+  double amplify_amplitude = 0.05, amplify_gain = 0.5;
+  int amplify_seed = 1;
   int max_passes = 256;        // exact mode
   int refine = 6;
 };
@@ -78,6 +82,9 @@ class Source {
   virtual bool fill(const NodeAddress& a, float* out, bool wait, float priority) = 0;
   /// Bricks shared by many nodes (instancing): an id, or 0 for a brick of its own.
   virtual uint64_t shared_id(const NodeAddress& a) const { (void)a; return 0; }
+  /// Bricks computed so far, and bricks read from the store.
+  virtual uint64_t produced() const { return 0; }
+  virtual uint64_t loaded() const { return 0; }
 };
 
 template <typename Stored>
@@ -121,6 +128,100 @@ class StoreSource final : public Source {
   const StoreLayout& layout_;
 };
 
+/// The store down to its finest level, then Perlin-noise amplification of it (procedural.h)
+/// for `levels` more: stored and produced bricks in one tree. The coarse field the producer
+/// amplifies is the finest stored level, trilinear, read through the cache by the loader.
+template <typename Stored>
+class AmplifiedSource final : public Source {
+ public:
+  AmplifiedSource(const RenderContext& ctx, const GigaVoxelsParams& p)
+      : ctx_(ctx), layout_(ctx.layout()), stored_(ctx), coarse_(ctx.cache(), coarse_counters_, ctx.layout().finest()) {
+    const NodeRecord& root = ctx.nodes().at(BrickKey{0, 0, 0, 0});
+    gigavoxels::AmplifiedParams ap;
+    ap.brick_size = layout_.brick_size;
+    ap.stored_depth = layout_.finest();
+    ap.max_depth = layout_.finest() + p.amplify_levels;
+    ap.amplitude = p.amplify_amplitude * std::max(double(root.max - root.min), 1e-30);  // a fraction of the value range
+    ap.gain = p.amplify_gain;
+    ap.seed = uint64_t(p.amplify_seed);
+    ap.lo = root.min, ap.hi = root.max;
+    const Vec3s dims = layout_.dims;
+    const double extent = double(layout_.brick_size) * double(int64_t(1) << layout_.finest());
+    producer_ = std::make_unique<gigavoxels::AmplifiedProducer>(
+        [this, dims, extent](double ux, double uy, double uz) {
+          // Unit cube -> finest voxel centres, clamped into the volume (the root brick's
+          // padding beyond the last voxel repeats it).
+          const double u[3] = {ux, uy, uz};
+          int64_t cell[3];
+          float f[3];
+          for (int a = 0; a < 3; ++a) {
+            const double x = std::clamp(u[a] * extent - 0.5, 0.0, double(dims[a] - 1));
+            cell[a] = std::min<int64_t>(int64_t(x), std::max<int64_t>(dims[a] - 2, 0));
+            f[a] = float(x - double(cell[a]));
+          }
+          std::lock_guard lock(coarse_mutex_);
+          float c[8];
+          coarse_.corners(cell[0], cell[1], cell[2], c);
+          return trilinear(c, f[0], f[1], f[2]);
+        },
+        ap);
+  }
+  int arity() const override { return 2; }
+  int brick_size() const override { return layout_.brick_size; }
+  int max_depth() const override { return producer_->max_depth(); }
+  NodeContent classify(const NodeAddress& a) const override {
+    const int s = layout_.finest();
+    const int above = std::max(a.depth - s, 0);  // levels below the stored depth
+    const BrickKey k{uint32_t(std::min(a.depth, s)), uint32_t(a.x >> above), uint32_t(a.y >> above), uint32_t(a.z >> above)};
+    NodeContent c;
+    if (!layout_.contains(k)) return c;  // outside the volume: nothing
+    // The stored node's range covers its cells up to the forward neighbours; an amplified
+    // brick also reads the backward half-cell and its border, so the backward neighbours
+    // count too. The detail still to come (down to max_depth for a stored node) widens it.
+    float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
+    for (int n = 0; n < 8; ++n) {
+      const BrickKey b{k.level, k.x - ((n & 1) && k.x > 0), k.y - ((n & 2) && k.y > 0), k.z - ((n & 4) && k.z > 0)};
+      const NodeRecord& r = ctx_.nodes().at(b);
+      lo = std::min(lo, r.min), hi = std::max(hi, r.max);
+    }
+    const double detail = producer_->detail_bound(a.depth > s ? a.depth : max_depth());
+    c.lo = float(lo - detail), c.hi = float(hi + detail);
+    const NodeRecord& n = ctx_.nodes().at(k);
+    if (!ctx_.scene().value_range_visible(c.lo, c.hi)) c.value = std::numeric_limits<float>::quiet_NaN();
+    else if (a.depth <= s && n.is_constant() && detail == 0) c.value = n.constant;
+    else c.kind = NodeContent::brick;
+    return c;
+  }
+  bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
+    if (a.depth > layout_.finest()) {
+      producer_->produce(a, out);
+      ++produced_;
+      return true;
+    }
+    const NodeRecord& n = ctx_.nodes().at(BrickKey{uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)});
+    if (n.is_constant()) {  // a constant stored node with detail below it
+      const size_t e = size_t(layout_.brick_size + 2);
+      std::fill_n(out, e * e * e, n.constant);
+      return true;
+    }
+    if (!stored_.fill(a, out, wait, priority)) return false;
+    ++loaded_;
+    return true;
+  }
+  uint64_t produced() const override { return produced_; }
+  uint64_t loaded() const override { return loaded_; }
+
+ private:
+  const RenderContext& ctx_;
+  const StoreLayout& layout_;
+  StoreSource<Stored> stored_;
+  RayCounters coarse_counters_;
+  std::mutex coarse_mutex_;
+  CellAccessor<Stored> coarse_;
+  std::unique_ptr<gigavoxels::AmplifiedProducer> producer_;
+  uint64_t produced_ = 0, loaded_ = 0;
+};
+
 class ProducerSource final : public Source {
  public:
   ProducerSource(std::unique_ptr<gigavoxels::BrickProducer> p, bool instanced) : p_(std::move(p)), instanced_(instanced) {}
@@ -130,13 +231,16 @@ class ProducerSource final : public Source {
   NodeContent classify(const NodeAddress& a) const override { return p_->classify(a); }
   bool fill(const NodeAddress& a, float* out, bool, float) override {
     p_->produce(a, out);
+    ++produced_;
     return true;
   }
+  uint64_t produced() const override { return produced_; }
   uint64_t shared_id(const NodeAddress& a) const override { return instanced_ ? p_->brick_id(a) + 1 : 0; }
 
  private:
   std::unique_ptr<gigavoxels::BrickProducer> p_;
   bool instanced_;
+  uint64_t produced_ = 0;
 };
 
 template <typename Stored>
@@ -180,6 +284,7 @@ class GigaVoxelsRenderer final : public Renderer {
     interrupted_ = 0;
     frame_subdivisions_ = frame_uploads_ = 0;
     frame_requests_ = frame_uses_ = 0;
+    produced_before_ = source_->produced(), loaded_before_ = source_->loaded();
     compaction_ = {};
     loader_seconds_ = 0;
     tree_.begin_feedback(frame_);
@@ -227,6 +332,8 @@ class GigaVoxelsRenderer final : public Renderer {
     stats.backend = {{"passes", double(passes_)},
                      {"subdivisions", double(frame_subdivisions_)},
                      {"uploads", double(frame_uploads_)},
+                     {"bricks_produced", double(source_->produced() - produced_before_)},
+                     {"bricks_loaded", double(source_->loaded() - loaded_before_)},
                      {"feedback_uses", double(frame_uses_)},
                      {"feedback_requests", double(frame_requests_)},
                      {"compaction_slots", double(compaction_.uses.slots + compaction_.requests.slots)},
@@ -746,6 +853,7 @@ class GigaVoxelsRenderer final : public Renderer {
   gigavoxels::CompactionReport compaction_;
   uint64_t passes_ = 0, interrupted_ = 0, frame_subdivisions_ = 0, frame_uploads_ = 0, frame_requests_ = 0, frame_uses_ = 0;
   uint64_t last_pass_progress_ = 0, last_pass_requests_ = 0;
+  uint64_t produced_before_ = 0, loaded_before_ = 0;
   int stalled_frames_ = 0;
   double loader_seconds_ = 0;
 };
@@ -770,8 +878,13 @@ BackendEntry gigavoxels_backend() {
       {"upload_budget", 512, 1, 1e6, "bricks written into the brick pool per frame"},
       {"brick_slots", 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds"},
       {"node_blocks", 0, 0, 1 << 22, "node pool blocks of N^3 nodes; 0: twice the brick slots"},
-      {"source", 0, 0, 1, "0: the store; 1: an instanced Menger sponge (N = 3) filling the volume's box"},
+      {"source", 0, 0, 2, "0: the store; 1: an instanced Menger sponge (N = 3) filling the volume's box; "
+                          "2: the store, amplified below its finest level by Perlin noise"},
       {"menger_brick", 27, 9, 81, "source=1: brick size M (9, 27 or 81)"},
+      {"amplify_levels", 3, 0, 10, "source=2: levels of noise detail below the finest stored level"},
+      {"amplify_amplitude", 0.05, 0, 10, "source=2: the first octave's amplitude, a fraction of the store's value range"},
+      {"amplify_gain", 0.5, 0, 4, "source=2: amplitude ratio between successive octaves"},
+      {"amplify_seed", 1, 0, 1e9, "source=2: noise seed"},
       {"max_passes", 256, 1, 100000, "exact mode: passes per frame before the rest of the frame takes coarser data"},
       {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
   };
@@ -790,6 +903,10 @@ BackendEntry gigavoxels_backend() {
     gp.node_blocks = uint32_t(p["node_blocks"]);
     gp.source = int(p["source"]);
     gp.menger_brick = int(p["menger_brick"]);
+    gp.amplify_levels = int(p["amplify_levels"]);
+    gp.amplify_amplitude = p["amplify_amplitude"];
+    gp.amplify_gain = p["amplify_gain"];
+    gp.amplify_seed = int(p["amplify_seed"]);
     gp.max_passes = int(p["max_passes"]);
     gp.refine = int(p["refine"]);
     return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
@@ -797,6 +914,8 @@ BackendEntry gigavoxels_backend() {
       std::unique_ptr<Source> source;
       if (gp.source == 1) {
         source = std::make_unique<ProducerSource>(std::make_unique<gigavoxels::MengerProducer>(gp.menger_brick), true);
+      } else if (gp.source == 2) {
+        source = std::make_unique<AmplifiedSource<Stored>>(ctx, gp);
       } else {
         source = std::make_unique<StoreSource<Stored>>(ctx);
       }

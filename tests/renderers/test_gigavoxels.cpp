@@ -214,6 +214,40 @@ TEST_F(GigaVoxels, ArityThreeRendersTheInstancedMengerSpongeFromOneBrick) {
     for (int x = 0; x < 8; ++x) EXPECT_FALSE(std::isfinite(fb.depth(x, y))) << x << "," << y;
 }
 
+TEST_F(GigaVoxels, ProceduralAndStoredBricksMixInOneTree) {
+  // Close up at a fine lod_ratio, the footprint asks for levels below the finest stored one
+  // (depth 3 of 64^3 in 8^3 bricks): those bricks are produced, the others loaded.
+  const std::string close = R"("camera": {"eye": [0.95, -0.25, 0.85], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
+  const Scene sc = scene(iso_scene() + R"(, "quality": {"lod_ratio": 0.25})", 64, close);
+  FrameBuffers stored, flat, detailed;
+  RenderSession s(sc, backend_options("gigavoxels", {{"exact", 1}}));
+  const FrameStats st = s.render(0, stored, kAll);
+  EXPECT_EQ(st.backend_value("bricks_produced"), 0);
+  const auto amplified = [&](double amplitude, FrameBuffers& fb) {
+    RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}, {"source", 2}, {"amplify_levels", 2}, {"amplify_amplitude", amplitude}}));
+    const FrameStats stats = g.render(0, fb, kAll);
+    EXPECT_TRUE(g.converged());
+    EXPECT_TRUE(all_finite(fb));
+    EXPECT_GT(stats.backend_value("bricks_loaded"), 0);
+    EXPECT_GT(stats.backend_value("bricks_produced"), 0);
+    return stats;
+  };
+  const FrameStats flat_stats = amplified(0, flat);
+  amplified(0.05, detailed);
+  // Without detail, a produced brick is the stored level resampled: the surface is the stored
+  // one up to re-interpolating the trilinear field (which is not trilinear one level down: its
+  // kinks at the stored voxels are smoothed, and Marschner-Lobb at 64^3 is all kinks, so the
+  // normals move by several degrees while the surface stays put).
+  const ImageError e_flat = compare_frames(flat, stored, 1.0);
+  EXPECT_LT(e_flat.depth_p99, 0.25) << e_flat.to_json();
+  EXPECT_LT(e_flat.coverage_mismatch_fraction, 0.005) << e_flat.to_json();
+  // With detail, the surface moves: by much more than the resampling.
+  const ImageError e_detail = compare_frames(detailed, stored, 1.0);
+  EXPECT_GT(e_detail.depth_mean, 3 * e_flat.depth_mean) << e_detail.to_json();
+  EXPECT_GT(e_detail.normal_mean_deg, 2 * e_flat.normal_mean_deg) << e_detail.to_json();
+  EXPECT_GT(flat_stats.backend_value("bricks_loaded") + flat_stats.backend_value("bricks_produced"), st.backend_value("uploads"));
+}
+
 /// The sponge around a corner of its box is a copy of itself scaled by 3 per level, so a camera
 /// zoomed k levels deeper (its offsets from the corner divided by 3^k) must see the same image.
 /// The box is 64 voxels wide (65 voxel centres) so that the camera's normalised coordinates are
