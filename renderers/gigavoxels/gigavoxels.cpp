@@ -119,13 +119,16 @@ class StoreSource final : public Source {
         float* dst = out + (z * e + y) * e;
         for (int64_t x = 0; x < e; ++x) dst[x] = float(row[x]);
       }
+    ++loaded_;
     return true;
   }
+  uint64_t loaded() const override { return loaded_; }
 
  private:
   static BrickKey key(const NodeAddress& a) { return {uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)}; }
   const RenderContext& ctx_;
   const StoreLayout& layout_;
+  uint64_t loaded_ = 0;
 };
 
 /// The store down to its finest level, then Perlin-noise amplification of it (procedural.h)
@@ -204,12 +207,10 @@ class AmplifiedSource final : public Source {
       std::fill_n(out, e * e * e, n.constant);
       return true;
     }
-    if (!stored_.fill(a, out, wait, priority)) return false;
-    ++loaded_;
-    return true;
+    return stored_.fill(a, out, wait, priority);
   }
   uint64_t produced() const override { return produced_; }
-  uint64_t loaded() const override { return loaded_; }
+  uint64_t loaded() const override { return stored_.loaded(); }
 
  private:
   const RenderContext& ctx_;
@@ -219,7 +220,7 @@ class AmplifiedSource final : public Source {
   std::mutex coarse_mutex_;
   CellAccessor<Stored> coarse_;
   std::unique_ptr<gigavoxels::AmplifiedProducer> producer_;
-  uint64_t produced_ = 0, loaded_ = 0;
+  uint64_t produced_ = 0;
 };
 
 class ProducerSource final : public Source {

@@ -67,13 +67,13 @@ void NodeTree::mark_used(uint32_t address) {
   }
 }
 
-void NodeTree::partition_by_recency(std::vector<uint32_t>& order, const std::vector<uint64_t>& stamps, uint64_t frame) {
-  std::stable_partition(order.begin(), order.end(), [&](uint32_t s) { return stamps[s] != frame; });
+void NodeTree::sort_by_recency(std::vector<uint32_t>& order, const std::vector<uint64_t>& stamps) {
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return stamps[a] < stamps[b]; });
 }
 
 void NodeTree::end_of_feedback() {
-  partition_by_recency(block_order_, block_stamp_, frame_);
-  partition_by_recency(brick_order_, brick_stamp_, frame_);
+  sort_by_recency(block_order_, block_stamp_);
+  sort_by_recency(brick_order_, brick_stamp_);
   block_cursor_ = brick_cursor_ = 0;
 }
 

@@ -12,10 +12,12 @@
 ///
 /// Replacement is GigaVoxels' two LRU caches with per-frame timestamps: the loader stamps the
 /// blocks and bricks that this frame's compacted feedback names (and the blocks above them),
-/// then end_of_feedback() stably partitions each pool's order into "not used this frame" (in
-/// their previous order, least recently used first) followed by "used this frame". Allocations
-/// take slots from the front and never one stamped with the current frame, so nothing the
-/// current frame used is evicted. Nothing is ever collapsed explicitly: an evicted block's
+/// then end_of_feedback() sorts each pool's order by stamp, least recently used first (never
+/// used: stamp 0), as the paper sorts its timestamps. Allocations take slots from the front and
+/// never one stamped with the current frame, so nothing the current frame used is evicted. The
+/// sort is by stamp, not a mere partition into this frame and the rest: a slot filled last
+/// frame that this frame's lists happened not to name (lists are bounded) must still rank
+/// after slots unused for longer, or two such nodes evict each other frame after frame. Nothing is ever collapsed explicitly: an evicted block's
 /// parent loses its child pointer (it is refined again if rays ask), and the blocks below it,
 /// no longer reachable, simply age out.
 ///
@@ -93,7 +95,7 @@ class NodeTree {
   void begin_feedback(uint64_t frame);
   /// @brief Usage feedback: the node, its brick, its block and every block above it were used.
   void mark_used(uint32_t address);
-  /// @brief Re-sorts both pools by recency (stable partition by this frame's stamps).
+  /// @brief Re-sorts both pools by recency (stable sort by stamp, oldest first).
   void end_of_feedback();
 
   /// @brief Sets the root's content (block 0, node 0). Call once before rendering.
@@ -126,7 +128,7 @@ class NodeTree {
  private:
   /// Takes the front of an LRU order unless it was used this frame; evicts what it held.
   uint32_t take_lru(std::vector<uint32_t>& order, size_t& cursor, const std::vector<uint64_t>& stamps);
-  static void partition_by_recency(std::vector<uint32_t>& order, const std::vector<uint64_t>& stamps, uint64_t frame);
+  static void sort_by_recency(std::vector<uint32_t>& order, const std::vector<uint64_t>& stamps);
 
   int n_, n3_, m_;
   size_t brick_values_;

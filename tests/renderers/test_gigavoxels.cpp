@@ -87,6 +87,34 @@ TEST(GigaVoxelsNodeTree, LruNeverEvictsWhatTheFrameUsedNorTheRoot) {
   EXPECT_TRUE(tree.node(0).has_brick());
 }
 
+TEST(GigaVoxelsNodeTree, AFreeSlotIsTakenBeforeOneFilledLastFrame) {
+  // A brick filled in frame 1 that frame 2's (bounded) feedback did not name is still more
+  // recent than a slot never used: taking it would make two such nodes evict each other.
+  NodeTree tree(2, 3, 5, 8);
+  tree.set_root(Node::make_data(false), {});
+  tree.begin_feedback(1);
+  tree.end_of_feedback();
+  const uint32_t children = tree.subdivide(0);
+  ASSERT_NE(children, kNoAddress);
+  for (int i = 0; i < 8; ++i) tree.set_node(children + uint32_t(i), Node::make_data(false));
+  const uint32_t first = tree.allocate_brick(children);
+  ASSERT_NE(first, kNoAddress);
+  std::set<uint32_t> taken{first};
+  for (uint64_t frame = 2; frame <= 4; ++frame) {  // each frame names nothing and fills one more brick
+    tree.begin_feedback(frame);
+    tree.end_of_feedback();
+    const uint32_t slot = tree.allocate_brick(children + uint32_t(frame));
+    ASSERT_NE(slot, kNoAddress);
+    EXPECT_TRUE(taken.insert(slot).second) << "frame " << frame << " evicted slot " << slot << " while free slots remained";
+  }
+  EXPECT_TRUE(tree.node(children).has_brick());
+  // All 4 slots are full now: the next brick evicts the least recently filled, the first.
+  tree.begin_feedback(5);
+  tree.end_of_feedback();
+  EXPECT_EQ(tree.allocate_brick(children + 7), first);
+  EXPECT_FALSE(tree.node(children).has_brick());
+}
+
 /// Marschner-Lobb 64^3 f32 in 8^3 bricks (4 levels), and a Menger sponge store.
 class GigaVoxels : public ::testing::Test {
  protected:
