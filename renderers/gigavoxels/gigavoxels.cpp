@@ -244,12 +244,15 @@ class ProducerSource final : public Source {
   uint64_t produced_ = 0;
 };
 
-template <typename Stored>
+/// Voxel: the brick pool's type, the store's own for a store (a copy of its bricks, 1 byte
+/// per voxel for 8-bit data: the samples are memory-bound) and float for produced bricks.
+template <typename Voxel>
 class GigaVoxelsRenderer final : public Renderer {
  public:
   GigaVoxelsRenderer(const RenderContext& ctx, const GigaVoxelsParams& p, std::unique_ptr<Source> source)
       : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), p_(p), shading_(scene_.shading, geo_), source_(std::move(source)),
-        tree_(source_->arity(), node_blocks(ctx, p, *source_), brick_slots(ctx, p, *source_), source_->brick_size()) {
+        tree_(source_->arity(), node_blocks(ctx, p, *source_), brick_slots(ctx, p, *source_), source_->brick_size()),
+        pool_(size_t(tree_.brick_capacity()) * tree_.brick_values()) {
     lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
     n_ = source_->arity();
     inv_log_arity_ = 1.0 / std::log(double(n_));
@@ -356,12 +359,13 @@ class GigaVoxelsRenderer final : public Renderer {
   }
 
   const NodeTree& tree() const { return tree_; }
+  const Voxel* brick(uint32_t slot) const { return pool_.data() + size_t(slot) * tree_.brick_values(); }
 
  private:
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
     const uint64_t e = uint64_t(s.brick_size() + 2);
-    return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / (e * e * e * 4), 8, 1u << 20));
+    return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / (e * e * e * sizeof(Voxel)), 8, 1u << 20));
   }
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
@@ -410,7 +414,8 @@ class GigaVoxelsRenderer final : public Renderer {
     if (!source_->fill(a, scratch_.data(), wait, float(a.depth))) return false;
     const uint32_t slot = tree_.allocate_brick(address);
     if (slot == gigavoxels::kNoAddress) return false;
-    std::copy(scratch_.begin(), scratch_.end(), tree_.brick_data(slot));
+    std::transform(scratch_.begin(), scratch_.end(), pool_.begin() + std::ptrdiff_t(size_t(slot) * tree_.brick_values()),
+                   [](float v) { return Voxel(v); });  // exact: the values came from Voxel (or are float)
     if (const uint64_t id = source_->shared_id(a)) {
       tree_.keep_brick(slot);
       shared_[id] = slot;
@@ -483,7 +488,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
   /// A brick as a sample sees it: the pool slot, its node's depth and frame.
   struct LevelBrick {
-    const float* data = nullptr;
+    const Voxel* data = nullptr;
     int depth = -1;
     double scale = 1;  // N^depth, rounded (voxel sizes and gradients only)
     NodeFrame frame;
@@ -509,9 +514,10 @@ class GigaVoxelsRenderer final : public Renderer {
         cell[a] = std::min<int64_t>(int64_t(l), e - 2);
         u[a] = l - float(cell[a]);
       }
-      const float* q = b.data + (cell[2] * e + cell[1]) * e + cell[0];
+      const Voxel* q = b.data + (cell[2] * e + cell[1]) * e + cell[0];
       const int64_t dy = e, dz = e * e;
-      const float c[8] = {q[0], q[1], q[dy], q[dy + 1], q[dz], q[dz + 1], q[dz + dy], q[dz + dy + 1]};
+      const float c[8] = {float(q[0]),  float(q[1]),  float(q[dy]),      float(q[dy + 1]),
+                          float(q[dz]), float(q[dz + 1]), float(q[dz + dy]), float(q[dz + dy + 1])};
       if (gradient) *gradient = Vec3d(trilinear_gradient(c, u[0], u[1], u[2])) * (b.scale * double(r.m_));
       return trilinear(c, u[0], u[1], u[2]);
     }
@@ -611,7 +617,7 @@ class GigaVoxelsRenderer final : public Renderer {
         uint32_t want = 0;
         for (;;) {
           ++counters.nodes;
-          if (node.has_brick()) lv.push({r.tree_.brick(node.brick()), depth, scale, frame});
+          if (node.has_brick()) lv.push({r.brick(node.brick()), depth, scale, frame});
           if (node.constant()) break;
           if (depth >= lambda) break;  // its voxels cover at most lod_ratio pixels
           if (!node.has_children()) {
@@ -699,7 +705,8 @@ class GigaVoxelsRenderer final : public Renderer {
             last = true;
           }
           const double fp = footprint(t);
-          const double lam = depth_for(fp);
+          // Finer than the finest level met: that level alone, without a log per sample.
+          const double lam = fp <= fine_voxel ? double(fine.depth) : depth_for(fp);
           const double dt_unit = r.step_ * std::max(fp, fine_voxel);
           const double dt = dt_unit / unit_per_t;
           ++counters.samples;
@@ -832,6 +839,7 @@ class GigaVoxelsRenderer final : public Renderer {
   ShadingModel shading_;
   std::unique_ptr<Source> source_;
   NodeTree tree_;
+  std::vector<Voxel> pool_;  // the brick pool's voxels, brick_capacity() x (M + 2)^3
   std::optional<float> outside_value_;  // the value outside the volume, where it is defined
   std::vector<Scale> scales_;  // N^depth
   double unit_offset_ = 0.5;   // unit = (voxel + unit_offset) / extent
@@ -920,7 +928,8 @@ BackendEntry gigavoxels_backend() {
       } else {
         source = std::make_unique<StoreSource<Stored>>(ctx);
       }
-      return std::make_unique<GigaVoxelsRenderer<Stored>>(ctx, gp, std::move(source));
+      if (gp.source == 0) return std::make_unique<GigaVoxelsRenderer<Stored>>(ctx, gp, std::move(source));
+      return std::make_unique<GigaVoxelsRenderer<float>>(ctx, gp, std::move(source));
     });
   };
   return e;

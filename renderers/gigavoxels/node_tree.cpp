@@ -21,7 +21,6 @@ NodeTree::NodeTree(int arity, uint32_t blocks, uint32_t bricks, int brick_size) 
   n3_ = n_ * n_ * n_;
   brick_values_ = size_t(m_ + 2) * size_t(m_ + 2) * size_t(m_ + 2);
   nodes_.assign(size_t(blocks) * size_t(n3_), Node{});
-  bricks_.assign(size_t(bricks) * brick_values_, 0.0f);
   block_parent_.assign(blocks, kNoAddress);
   block_base_.assign(blocks, NodeAddress{});
   brick_owner_.assign(bricks, kNoAddress);

@@ -21,7 +21,10 @@
 /// parent loses its child pointer (it is refined again if rays ask), and the blocks below it,
 /// no longer reachable, simply age out.
 ///
-/// Thread safety: rays read node() and brick() concurrently while nothing writes; every other
+/// The tree manages brick slots, not voxels: the back end keeps the pool's voxels itself, in
+/// the type its source delivers (a store's own type, 4x smaller than float for 8-bit data).
+///
+/// Thread safety: rays read node() concurrently while nothing writes; every other
 /// member is the loader's and runs on one thread between passes.
 
 #include <cstdint>
@@ -81,13 +84,13 @@ class NodeTree {
   int block_nodes() const { return n3_; }
   int brick_size() const { return m_; }
   int brick_edge() const { return m_ + 2; }
+  /// @brief Voxels per brick, (M + 2)^3.
   size_t brick_values() const { return brick_values_; }
   uint32_t block_capacity() const { return uint32_t(block_parent_.size()); }
   uint32_t brick_capacity() const { return uint32_t(brick_owner_.size()); }
 
   // --- read by rays ---------------------------------------------------------------------
   Node node(uint32_t address) const { return nodes_[address]; }
-  const float* brick(uint32_t slot) const { return bricks_.data() + size_t(slot) * brick_values_; }
   uint32_t child_address(Node n, int child) const { return (n.child_block() - 1) * uint32_t(n3_) + uint32_t(child); }
 
   // --- the loader -----------------------------------------------------------------------
@@ -106,10 +109,9 @@ class NodeTree {
   /// the N^3 children with set_node().
   uint32_t subdivide(uint32_t address);
   void set_node(uint32_t address, Node n) { nodes_[address] = n; }
-  /// @brief A brick slot for the node (least recently used, not used this frame), writable
-  /// through brick_data() until the next allocation; kNoAddress when none can be taken.
+  /// @brief A brick slot for the node (least recently used, not used this frame), for the
+  /// caller to fill in its voxel pool; kNoAddress when none can be taken.
   uint32_t allocate_brick(uint32_t address);
-  float* brick_data(uint32_t slot) { return bricks_.data() + size_t(slot) * brick_values_; }
   /// @brief Takes a slot out of replacement for good: an instanced brick that many nodes point
   /// to (evicting it would leave all but its owner pointing at other data).
   void keep_brick(uint32_t slot);
@@ -133,7 +135,6 @@ class NodeTree {
   int n_, n3_, m_;
   size_t brick_values_;
   std::vector<Node> nodes_;        // blocks * N^3
-  std::vector<float> bricks_;      // bricks * (M + 2)^3
   // CPU side: what each block and brick belongs to, and their recency.
   std::vector<uint32_t> block_parent_;   // node address whose children the block is, kNoAddress: free
   std::vector<NodeAddress> block_base_;  // address of the block's first node (child 0)
