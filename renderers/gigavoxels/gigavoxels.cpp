@@ -289,6 +289,7 @@ class GigaVoxelsRenderer final : public Renderer {
     frame_subdivisions_ = frame_uploads_ = 0;
     frame_requests_ = frame_uses_ = 0;
     produced_before_ = source_->produced(), loaded_before_ = source_->loaded();
+    failed_before_ = tree_.counters().failed_allocations;
     compaction_ = {};
     loader_seconds_ = 0;
     tree_.begin_feedback(frame_);
@@ -348,7 +349,7 @@ class GigaVoxelsRenderer final : public Renderer {
                      {"bricks_in_use", double(tree_.bricks_in_use())},
                      {"brick_slots", double(tree_.brick_capacity())},
                      {"bricks_used", double(tree_.bricks_used_this_frame())},
-                     {"failed_allocations", double(tree_.counters().failed_allocations)},
+                     {"failed_allocations", double(tree_.counters().failed_allocations - failed_before_)},
                      {"loader_ms", loader_seconds_ * 1e3}};
   }
 
@@ -410,6 +411,7 @@ class GigaVoxelsRenderer final : public Renderer {
         return true;
       }
     }
+    if (address != 0 && !tree_.brick_slot_available()) return false;  // the root's slot is always there
     scratch_.resize(tree_.brick_values());
     if (!source_->fill(a, scratch_.data(), wait, float(a.depth))) return false;
     const uint32_t slot = tree_.allocate_brick(address);
@@ -862,7 +864,7 @@ class GigaVoxelsRenderer final : public Renderer {
   gigavoxels::CompactionReport compaction_;
   uint64_t passes_ = 0, interrupted_ = 0, frame_subdivisions_ = 0, frame_uploads_ = 0, frame_requests_ = 0, frame_uses_ = 0;
   uint64_t last_pass_progress_ = 0, last_pass_requests_ = 0;
-  uint64_t produced_before_ = 0, loaded_before_ = 0;
+  uint64_t produced_before_ = 0, loaded_before_ = 0, failed_before_ = 0;
   int stalled_frames_ = 0;
   double loader_seconds_ = 0;
 };

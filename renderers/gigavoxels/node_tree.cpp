@@ -54,16 +54,28 @@ void NodeTree::begin_feedback(uint64_t frame) {
 }
 
 void NodeTree::mark_used(uint32_t address) {
-  const Node n = nodes_[address];
-  if (n.has_brick()) brick_stamp_[n.brick()] = frame_;
-  // The block and its ancestors: a used node must stay reachable.
+  const auto stamp_brick = [&](uint32_t node) {
+    const Node n = nodes_[node];
+    if (n.has_brick()) brick_stamp_[n.brick()] = frame_;
+  };
+  stamp_brick(address);
+  // The blocks above, so that a used node stays reachable, and the bricks above, which rays
+  // blend with (quadrilinear filtering reads up to two coarser levels) but do not name.
   for (uint32_t block = address / uint32_t(n3_); block != 0;) {
     if (block_stamp_[block] == frame_) break;  // this chain is stamped already
     block_stamp_[block] = frame_;
     const uint32_t parent = block_parent_[block];
     if (parent == kNoAddress) break;
+    stamp_brick(parent);
     block = parent / uint32_t(n3_);
   }
+}
+
+bool NodeTree::brick_slot_available() {
+  while (brick_cursor_ < brick_order_.size() && brick_stamp_[brick_order_[brick_cursor_]] == frame_) ++brick_cursor_;
+  if (brick_cursor_ < brick_order_.size()) return true;
+  ++counters_.failed_allocations;
+  return false;
 }
 
 void NodeTree::sort_by_recency(std::vector<uint32_t>& order, const std::vector<uint64_t>& stamps) {

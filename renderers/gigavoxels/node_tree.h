@@ -96,7 +96,8 @@ class NodeTree {
   // --- the loader -----------------------------------------------------------------------
   /// @brief Starts a frame: timestamps below this are "not used this frame".
   void begin_feedback(uint64_t frame);
-  /// @brief Usage feedback: the node, its brick, its block and every block above it were used.
+  /// @brief Usage feedback: the node, its brick, its block, and every block and brick above it
+  /// were used.
   void mark_used(uint32_t address);
   /// @brief Re-sorts both pools by recency (stable sort by stamp, oldest first).
   void end_of_feedback();
@@ -112,6 +113,9 @@ class NodeTree {
   /// @brief A brick slot for the node (least recently used, not used this frame), for the
   /// caller to fill in its voxel pool; kNoAddress when none can be taken.
   uint32_t allocate_brick(uint32_t address);
+  /// @brief Whether allocate_brick() would find a slot (one not used this frame): asked before
+  /// a brick is read or produced, so that a full pool costs no work.
+  bool brick_slot_available();
   /// @brief Takes a slot out of replacement for good: an instanced brick that many nodes point
   /// to (evicting it would leave all but its owner pointing at other data).
   void keep_brick(uint32_t slot);

@@ -115,6 +115,33 @@ TEST(GigaVoxelsNodeTree, AFreeSlotIsTakenBeforeOneFilledLastFrame) {
   EXPECT_FALSE(tree.node(children).has_brick());
 }
 
+TEST(GigaVoxelsNodeTree, UsingANodeKeepsTheCoarserBricksRaysBlendWith) {
+  // Quadrilinear filtering reads the bricks of the levels above the node a ray names: marking
+  // the node must keep those too, and a full pool must say so before any brick is made.
+  NodeTree tree(2, 4, 4, 8);
+  tree.set_root(Node::make_data(false), {});
+  tree.begin_feedback(1);
+  tree.end_of_feedback();
+  const uint32_t a = tree.subdivide(0);
+  for (int i = 0; i < 8; ++i) tree.set_node(a + uint32_t(i), Node::make_data(false));
+  const uint32_t b = tree.subdivide(a + 5);
+  for (int i = 0; i < 8; ++i) tree.set_node(b + uint32_t(i), Node::make_data(false));
+  const uint32_t parent_brick = tree.allocate_brick(a + 5);
+  const uint32_t child_brick = tree.allocate_brick(b + 2);
+  ASSERT_NE(parent_brick, kNoAddress);
+  ASSERT_NE(child_brick, kNoAddress);
+  tree.begin_feedback(2);
+  tree.mark_used(b + 2);  // only the deepest node is named
+  tree.end_of_feedback();
+  EXPECT_TRUE(tree.brick_slot_available());  // one slot (of 1 + 3) is still free
+  EXPECT_NE(tree.allocate_brick(b + 3), kNoAddress);
+  EXPECT_FALSE(tree.brick_slot_available()) << "the only other bricks were used this frame";
+  EXPECT_EQ(tree.allocate_brick(b + 4), kNoAddress);
+  EXPECT_TRUE(tree.node(a + 5).has_brick());
+  EXPECT_EQ(tree.node(a + 5).brick(), parent_brick);
+  EXPECT_EQ(tree.node(b + 2).brick(), child_brick);
+}
+
 /// Marschner-Lobb 64^3 f32 in 8^3 bricks (4 levels), and a Menger sponge store.
 class GigaVoxels : public ::testing::Test {
  protected:
