@@ -31,11 +31,13 @@ namespace {
 
 using namespace brickyard;
 
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t i = std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5));
-  return v[i];
+/// Nearest-rank percentile (metrics.h) of a copy, p in [0, 100].
+double pct(std::vector<double> v, double p) { return percentile(v, p); }
+
+double mean(const std::vector<double>& v) {
+  double sum = 0;
+  for (double x : v) sum += x;
+  return v.empty() ? 0 : sum / double(v.size());
 }
 
 std::vector<int> frame_list(const std::string& text, std::string_view option) {
@@ -78,16 +80,15 @@ int run(const Options& o) {
     rows.push_back(row);
     ms.push_back(st.seconds * 1e3);
   }
-  fmt::print("flight: frame time median {:.1f} ms, p95 {:.1f} ms, mean {:.1f} ms; converged frames {}/{}\n", percentile(ms, 0.5),
-             percentile(ms, 0.95), [&] { double s = 0; for (double v : ms) s += v; return s / double(ms.size()); }(),
-             [&] { int c = 0; for (const auto& r : rows) c += r[2] != 0; return c; }(), frames);
+  int converged = 0;
+  for (const auto& r : rows) converged += r[2] != 0;
+  fmt::print("flight: frame time median {:.1f} ms, p95 {:.1f} ms, mean {:.1f} ms; converged frames {}/{}\n", pct(ms, 50), pct(ms, 95),
+             mean(ms), converged, frames);
   for (size_t i = 0; i < names.size(); ++i) {
     std::vector<double> v;
     for (const auto& r : rows) v.push_back(r[3 + i]);
-    double sum = 0;
-    for (double x : v) sum += x;
-    fmt::print("  {:<32} mean {:>12.1f}  median {:>12.1f}  p95 {:>12.1f}  max {:>12.1f}\n", names[i], sum / double(v.size()),
-               percentile(v, 0.5), percentile(v, 0.95), percentile(v, 1.0));
+    fmt::print("  {:<32} mean {:>12.1f}  median {:>12.1f}  p95 {:>12.1f}  max {:>12.1f}\n", names[i], mean(v), pct(v, 50), pct(v, 95),
+               pct(v, 100));
   }
   if (!o.csv.empty()) {
     std::ofstream csv(o.csv);
@@ -114,7 +115,7 @@ int run(const Options& o) {
       fresh.cache().wait_idle();
     } while (!fresh.converged() && ++n < 200);
     fmt::print("jump {} -> {}: {} frames to converge ({}), first {:.1f} ms, max {:.1f} ms\n", ab[0], ab[1], jump_ms.size(),
-               fresh.converged() ? "converged" : "NOT converged", jump_ms.front(), percentile(jump_ms, 1.0));
+               fresh.converged() ? "converged" : "NOT converged", jump_ms.front(), pct(jump_ms, 100));
   }
 
   // Converged frames: their time and their error.
@@ -141,7 +142,7 @@ int run(const Options& o) {
     const ImageError e = compare_frames(fb, truth, session.context().geometry().voxel_size);
     fmt::print("frame {}: converged after {} frames; converged frame time median {:.1f} ms ({:.1f} fps); RMSE {:.5f} against {}, "
                "coverage mismatch {:.4f}\n",
-               f, settle_frames, percentile(t, 0.5), 1e3 / percentile(t, 0.5), e.rmse, against, e.coverage_mismatch_fraction);
+               f, settle_frames, pct(t, 50), 1e3 / pct(t, 50), e.rmse, against, e.coverage_mismatch_fraction);
   }
   return 0;
 }

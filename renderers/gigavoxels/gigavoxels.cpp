@@ -87,6 +87,9 @@ class Source {
   virtual uint64_t loaded() const { return 0; }
 };
 
+/// A store's brick octree is the N = 2 tree: a node at depth d is the brick of level d.
+BrickKey store_key(const NodeAddress& a) { return {uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)}; }
+
 template <typename Stored>
 class StoreSource final : public Source {
  public:
@@ -95,7 +98,7 @@ class StoreSource final : public Source {
   int brick_size() const override { return layout_.brick_size; }
   int max_depth() const override { return layout_.finest(); }
   NodeContent classify(const NodeAddress& a) const override {
-    const BrickKey k = key(a);
+    const BrickKey k = store_key(a);
     NodeContent c;
     if (!layout_.contains(k)) return c;  // outside the volume: nothing
     const NodeRecord& n = ctx_.nodes().at(k);
@@ -108,7 +111,7 @@ class StoreSource final : public Source {
     return c;
   }
   bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
-    const BrickKey k = key(a);
+    const BrickKey k = store_key(a);
     BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, true);
     if (!h.resident()) return false;
     const Stored* src = h.template voxels<Stored>();
@@ -125,7 +128,6 @@ class StoreSource final : public Source {
   uint64_t loaded() const override { return loaded_; }
 
  private:
-  static BrickKey key(const NodeAddress& a) { return {uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)}; }
   const RenderContext& ctx_;
   const StoreLayout& layout_;
   uint64_t loaded_ = 0;
@@ -148,24 +150,13 @@ class AmplifiedSource final : public Source {
     ap.gain = p.amplify_gain;
     ap.seed = uint64_t(p.amplify_seed);
     ap.lo = root.min, ap.hi = root.max;
-    const Vec3s dims = layout_.dims;
     const double extent = double(layout_.brick_size) * double(int64_t(1) << layout_.finest());
     producer_ = std::make_unique<gigavoxels::AmplifiedProducer>(
-        [this, dims, extent](double ux, double uy, double uz) {
-          // Unit cube -> finest voxel centres, clamped into the volume (the root brick's
-          // padding beyond the last voxel repeats it).
-          const double u[3] = {ux, uy, uz};
-          int64_t cell[3];
-          float f[3];
-          for (int a = 0; a < 3; ++a) {
-            const double x = std::clamp(u[a] * extent - 0.5, 0.0, double(dims[a] - 1));
-            cell[a] = std::min<int64_t>(int64_t(x), std::max<int64_t>(dims[a] - 2, 0));
-            f[a] = float(x - double(cell[a]));
-          }
+        [this, extent](double ux, double uy, double uz) {
+          // Unit cube -> finest voxel centres; the sampler clamps into the volume (the root
+          // brick's padding beyond the last voxel repeats it).
           std::lock_guard lock(coarse_mutex_);
-          float c[8];
-          coarse_.corners(cell[0], cell[1], cell[2], c);
-          return trilinear(c, f[0], f[1], f[2]);
+          return float(coarse_.sample(Vec3d(ux, uy, uz) * extent - Vec3d(0.5)));
         },
         ap);
   }
@@ -201,7 +192,7 @@ class AmplifiedSource final : public Source {
       ++produced_;
       return true;
     }
-    const NodeRecord& n = ctx_.nodes().at(BrickKey{uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)});
+    const NodeRecord& n = ctx_.nodes().at(store_key(a));
     if (n.is_constant()) {  // a constant stored node with detail below it
       const size_t e = size_t(layout_.brick_size + 2);
       std::fill_n(out, e * e * e, n.constant);
@@ -218,7 +209,7 @@ class AmplifiedSource final : public Source {
   StoreSource<Stored> stored_;
   RayCounters coarse_counters_;
   std::mutex coarse_mutex_;
-  CellAccessor<Stored> coarse_;
+  TrilinearSampler<Stored, double> coarse_;
   std::unique_ptr<gigavoxels::AmplifiedProducer> producer_;
   uint64_t produced_ = 0;
 };

@@ -23,6 +23,7 @@ namespace {
 using testing::all_finite;
 using testing::backend_options;
 using testing::dvr_scene;
+using testing::expect_as_good_as_raymarch;
 using testing::iso_scene;
 
 /// Marschner-Lobb 64^3 f32 in 8^3 bricks (4 levels): detail everywhere, no constant bricks.
@@ -70,25 +71,12 @@ TEST_F(Gobbetti, WithAnAmplePoolAndASettledCameraMatchesTheReference) {
   // sampling error of fixed steps: as small as the baseline's at the same step, and small.
   for (const std::string& mode : {iso_scene(), dvr_scene()}) {
     const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.25})", 96);
-    RenderSession ref(sc, backend_options("reference"));
-    FrameBuffers truth, fb, baseline;
-    ref.render(0, truth, kAll);
-    const double voxel = ref.context().geometry().voxel_size;
+    FrameBuffers fb;
     RenderSession g(sc, backend_options("gobbetti", {{"step", 0.03125}, {"refine", 20}}));
     g.settle(0, kAll);
     const FrameStats st = g.render(0, fb, kAll);
     ASSERT_TRUE(all_finite(fb));
-    RenderSession rm(sc, backend_options("raymarch", {{"step", 0.03125}, {"refine", 20}}));
-    rm.render(0, baseline, kAll);
-    const ImageError e = compare_frames(fb, truth, voxel);
-    const ImageError b = compare_frames(baseline, truth, voxel);
-    EXPECT_LT(e.rmse, 0.015) << e.to_json();
-    EXPECT_LE(e.rmse, 1.2 * b.rmse + 1e-3) << e.to_json() << b.to_json();
-    EXPECT_LT(e.coverage_mismatch_fraction, 0.005) << e.to_json();
-    if (sc.mode == RenderMode::iso) {
-      EXPECT_LT(e.depth_p99, 0.05) << e.to_json();
-      EXPECT_LT(e.normal_mean_deg, 2.0) << e.to_json();
-    }
+    expect_as_good_as_raymarch(sc, fb, 0.03125, 0.015);
     EXPECT_GT(st.backend_value("working_set"), 0);
   }
 }
