@@ -12,6 +12,11 @@
 // that should be finer asks to be subdivided, a node without its brick asks for it (at most one
 // request per ray); the ray goes on with coarser data (approximate mode) or stops and resumes
 // after the loader has served the pass (exact mode).
+// Two CPU economies that change no image: a descent resumes from the deepest node of the last
+// one that still contains the new position (the nodes it then passes are the ones a descent
+// from the root would), and inside a brick, rays leap 4^3-cell groups that hold nothing
+// visible (a bit per group, set when the brick is written) to the first sample position past
+// them.
 // Between frames (end_frame, one thread): compaction, usage stamps, LRU order, then the
 // requests within the per-frame budgets.
 
@@ -67,7 +72,16 @@ struct GigaVoxelsParams {
   int amplify_seed = 1;
   int max_passes = 256;        // exact mode
   int refine = 6;
+  bool skip_cells = true;      // leap the cells of a brick that hold nothing visible
 };
+
+/// Empty-space skipping inside a brick: the brick's trilinear cells grouped into cubes of
+/// kCellGroup^3, one bit each, set when the group's voxel values could show something (an
+/// isovalue within their range, or a visible stretch of the transfer function). Trilinear
+/// interpolation stays within its corners' range, so a ray crosses a clear group without a
+/// sample. The paper skips only whole constant nodes; with M = 32 nearly every brick a surface
+/// passes through is visible, and most of its cells are not.
+constexpr int kCellGroup = 4;
 
 /// Where bricks come from: the store through the cache, or a procedural producer.
 class Source {
@@ -248,6 +262,10 @@ class GigaVoxelsRenderer final : public Renderer {
     n_ = source_->arity();
     inv_log_arity_ = 1.0 / std::log(double(n_));
     m_ = source_->brick_size();
+    inv_m_ = 1.0 / double(m_);
+    groups_ = groups_per_axis(m_);
+    group_words_ = group_words(m_);
+    group_bits_.assign(size_t(tree_.brick_capacity()) * group_words_, 0);
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -352,12 +370,43 @@ class GigaVoxelsRenderer final : public Renderer {
 
   const NodeTree& tree() const { return tree_; }
   const Voxel* brick(uint32_t slot) const { return pool_.data() + size_t(slot) * tree_.brick_values(); }
+  const uint64_t* visible_groups(uint32_t slot) const { return group_bits_.data() + size_t(slot) * group_words_; }
 
  private:
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
     const uint64_t e = uint64_t(s.brick_size() + 2);
-    return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / (e * e * e * sizeof(Voxel)), 8, 1u << 20));
+    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_words(s.brick_size()) * sizeof(uint64_t);
+    return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / slot_bytes, 8, 1u << 20));
+  }
+  /// Cell groups per axis: the cells start at sample coordinates 0 .. M (M + 1 of them, the
+  /// border included), kCellGroup to a group.
+  static int groups_per_axis(int m) { return m / kCellGroup + 1; }
+  static size_t group_words(int m) {
+    const size_t g = size_t(groups_per_axis(m));
+    return (g * g * g + 63) / 64;
+  }
+
+  /// Sets the visibility bits of a freshly written brick: a group shows something when the
+  /// range of its voxels (the corners of its cells, up to the brick's last voxel) does.
+  void mark_visible_groups(uint32_t slot) {
+    const Voxel* v = brick(slot);
+    uint64_t* bits = group_bits_.data() + size_t(slot) * group_words_;
+    std::fill_n(bits, group_words_, 0);
+    const int e = m_ + 2;
+    for (int gz = 0, i = 0; gz < groups_; ++gz)
+      for (int gy = 0; gy < groups_; ++gy)
+        for (int gx = 0; gx < groups_; ++gx, ++i) {
+          float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+          for (int z = gz * kCellGroup; z <= std::min((gz + 1) * kCellGroup, e - 1); ++z)
+            for (int y = gy * kCellGroup; y <= std::min((gy + 1) * kCellGroup, e - 1); ++y) {
+              const Voxel* row = v + (size_t(z) * size_t(e) + size_t(y)) * size_t(e);
+              for (int x = gx * kCellGroup; x <= std::min((gx + 1) * kCellGroup, e - 1); ++x)
+                lo = std::min(lo, float(row[x])), hi = std::max(hi, float(row[x]));
+            }
+          // NaN (never stored: the importers refuse it) would compare false: kept visible.
+          if (!(lo <= hi) || scene_.value_range_visible(lo, hi)) bits[i >> 6] |= uint64_t(1) << (i & 63);
+        }
   }
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
@@ -409,6 +458,7 @@ class GigaVoxelsRenderer final : public Renderer {
     if (slot == gigavoxels::kNoAddress) return false;
     std::transform(scratch_.begin(), scratch_.end(), pool_.begin() + std::ptrdiff_t(size_t(slot) * tree_.brick_values()),
                    [](float v) { return Voxel(v); });  // exact: the values came from Voxel (or are float)
+    mark_visible_groups(slot);
     if (const uint64_t id = source_->shared_id(a)) {
       tree_.keep_brick(slot);
       shared_[id] = slot;
@@ -477,11 +527,13 @@ class GigaVoxelsRenderer final : public Renderer {
   struct NodeFrame {
     double eye[3] = {};
     double dir[3] = {};
+    double inv_dir[3] = {};  // 1 / dir (infinite along an axis the ray is parallel to)
   };
 
   /// A brick as a sample sees it: the pool slot, its node's depth and frame.
   struct LevelBrick {
     const Voxel* data = nullptr;
+    const uint64_t* visible_groups = nullptr;  // one bit per cell group (kCellGroup)
     int depth = -1;
     double scale = 1;  // N^depth, rounded (voxel sizes and gradients only)
     NodeFrame frame;
@@ -494,7 +546,8 @@ class GigaVoxelsRenderer final : public Renderer {
     const bool gradients;
 
     Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
-        : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)) {}
+        : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
+          path(size_t(r.source_->max_depth()) + 1) {}
 
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t.
     float sample_brick(const LevelBrick& b, double t, Vec3d* gradient) const {
@@ -525,21 +578,70 @@ class GigaVoxelsRenderer final : public Renderer {
       }
     };
 
-    /// Quadrilinear: the two levels around the footprint's depth lambda, among those collected.
-    float sample(const Levels& lv, double lambda, double t, Vec3d* gradient) const {
+    /// The bricks a sample at depth lambda reads: one, or (quadrilinear) the two levels around
+    /// lambda among those collected, blended with weight w on the finer.
+    struct Blend {
+      const LevelBrick* coarse = nullptr;  // null: `finer` alone
+      const LevelBrick* finer = nullptr;
+      double w = 1;
+    };
+    Blend blend(const Levels& lv, double lambda) const {
       const LevelBrick& fine = lv.b[lv.count - 1];
-      if (!r.p_.quadrilinear || lv.count == 1 || lambda >= fine.depth) return sample_brick(fine, t, gradient);
+      if (!r.p_.quadrilinear || lv.count == 1 || lambda >= fine.depth) return {nullptr, &fine, 1};
       int i = lv.count - 1;
       while (i > 0 && lv.b[i - 1].depth > lambda) --i;  // b[i] finer than lambda, b[i-1] coarser
-      if (i == 0) return sample_brick(lv.b[0], t, gradient);
+      if (i == 0) return {nullptr, &lv.b[0], 1};
       const LevelBrick& coarse = lv.b[i - 1];
       const LevelBrick& finer = lv.b[i];
-      const double w = std::clamp((lambda - coarse.depth) / double(finer.depth - coarse.depth), 0.0, 1.0);
+      return {&coarse, &finer, std::clamp((lambda - coarse.depth) / double(finer.depth - coarse.depth), 0.0, 1.0)};
+    }
+
+    /// Quadrilinear: the two levels around the footprint's depth lambda, among those collected.
+    float sample(const Levels& lv, double lambda, double t, Vec3d* gradient) const {
+      const Blend bl = blend(lv, lambda);
+      if (!bl.coarse) return sample_brick(*bl.finer, t, gradient);
       Vec3d gc(0.0), gf(0.0);
-      const float vc = sample_brick(coarse, t, gradient ? &gc : nullptr);
-      const float vf = sample_brick(finer, t, gradient ? &gf : nullptr);
-      if (gradient) *gradient = gc * (1 - w) + gf * w;
-      return float(vc * (1 - w) + vf * w);
+      const float vc = sample_brick(*bl.coarse, t, gradient ? &gc : nullptr);
+      const float vf = sample_brick(*bl.finer, t, gradient ? &gf : nullptr);
+      if (gradient) *gradient = gc * (1 - bl.w) + gf * bl.w;
+      return float(vc * (1 - bl.w) + vf * bl.w);
+    }
+
+    /// Whether the cell group of brick b at t is clear (holds nothing visible); then where
+    /// the ray leaves it and one of its voxels (every value in it is on that voxel's side of
+    /// every isovalue).
+    bool clear_group(const LevelBrick& b, double t, double& t_leave, float& voxel) const {
+      const double top = double(r.m_ + 1);
+      int g[3];
+      for (int a = 0; a < 3; ++a) {
+        const double l = std::clamp((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5, 0.0, top);
+        g[a] = int(l) / kCellGroup;
+      }
+      const int i = (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
+      if ((b.visible_groups[i >> 6] >> (i & 63)) & 1) return false;
+      t_leave = kInf;
+      for (int a = 0; a < 3; ++a) {
+        if (b.frame.dir[a] == 0) continue;
+        const double face = double((b.frame.dir[a] > 0 ? g[a] + 1 : g[a]) * kCellGroup);
+        t_leave = std::min(t_leave, ((face - 0.5) * r.inv_m_ - b.frame.eye[a]) * b.frame.inv_dir[a]);
+      }
+      const int64_t e = r.m_ + 2;
+      voxel = float(b.data[(int64_t(g[2]) * kCellGroup * e + int64_t(g[1]) * kCellGroup) * e + int64_t(g[0]) * kCellGroup]);
+      return true;
+    }
+
+    /// clear_group for what a sample at lambda reads. Two blended levels are clear together
+    /// when both are clear on the same side of every isovalue (DVR: never; both clear could
+    /// still blend to a visible value in between).
+    bool clear(const Levels& lv, double lambda, double t, bool iso, double& t_leave, float& voxel) const {
+      const Blend bl = blend(lv, lambda);
+      if (!clear_group(*bl.finer, t, t_leave, voxel)) return false;
+      if (!bl.coarse) return true;
+      double t_coarse;
+      float coarse_voxel;
+      if (!iso || !clear_group(*bl.coarse, t, t_coarse, coarse_voxel) || crossing(coarse_voxel, voxel)) return false;
+      t_leave = std::min(t_leave, t_coarse);
+      return true;
     }
 
     void pixel(int x, int y, RayState& s, FrameBuffers& out) {
@@ -582,6 +684,7 @@ class GigaVoxelsRenderer final : public Renderer {
         else whole = hi - double(c[a]);  // an eye this far outside never descends this deep
         f.eye[a] = whole + lo;
         f.dir[a] = dir[a] * s.hi;
+        f.inv_dir[a] = 1.0 / f.dir[a];
       }
       return f;
     }
@@ -597,38 +700,69 @@ class GigaVoxelsRenderer final : public Renderer {
       Vec3d hit_gradient(0.0);
       bool requested = false;
       int exit_axis = -1;
+      path_size = 0;
       while (t < ray.span.t1) {
-        const double lambda = depth_for(footprint(t));
-        // kd-restart descent.
+        const double entry_fp = footprint(t);
+        // kd-restart: the descent from the root to the node at t whose voxels match the
+        // footprint. The nodes it passes through are the last descent's as far as they still
+        // contain t (and are no coarser than the footprint asks), so it resumes from the
+        // deepest of those; the path and the levels collected are the same as from the root.
+        int restart = 0;
+        for (int i = path_size - 1; i > 0; --i)
+          if (path[i].contains(t)) {
+            restart = i;
+            break;
+          }
+        for (int i = 0; i < restart; ++i)
+          if (entry_fp * double(r.m_) * path[i].scale >= 1) {
+            restart = i;
+            break;
+          }
         Levels lv;
-        uint32_t address = 0;
-        Node node = r.tree_.node(0);
-        int depth = 0;
-        double scale = 1;
-        int64_t c[3] = {0, 0, 0};
-        NodeFrame frame = node_frame(0, c);
+        for (int i = 0; i < restart; ++i)
+          if (path[i].level.data) lv.push(path[i].level);
+        PathNode* p = &path[restart];
+        if (restart == 0) {
+          p->address = 0;
+          p->node = r.tree_.node(0);
+          p->c[0] = p->c[1] = p->c[2] = 0;
+          p->scale = 1;
+          p->frame = node_frame(0, p->c);
+        }
+        int depth = restart;
         uint32_t want = 0;
         for (;;) {
           ++counters.nodes;
-          if (node.has_brick()) lv.push({r.brick(node.brick()), depth, scale, frame});
-          if (node.constant()) break;
-          if (depth >= lambda) break;  // its voxels cover at most lod_ratio pixels
-          if (!node.has_children()) {
-            if (!node.max_refined()) want = kWantsSubdivision;
+          p->level.data = nullptr;
+          if (p->node.has_brick()) {
+            p->level = {r.brick(p->node.brick()), r.visible_groups(p->node.brick()), depth, p->scale, p->frame};
+            lv.push(p->level);
+          }
+          if (p->node.constant()) break;
+          if (entry_fp * double(r.m_) * p->scale >= 1) break;  // its voxels cover at most lod_ratio pixels
+          if (!p->node.has_children()) {
+            if (!p->node.max_refined()) want = kWantsSubdivision;
             break;
           }
-          int child = 0, stride = 1;
+          PathNode& child = path[depth + 1];
+          int index = 0, stride = 1;
           for (int a = 0; a < 3; ++a, stride *= n) {
-            const int64_t ci = std::clamp<int64_t>(int64_t(std::floor((frame.eye[a] + frame.dir[a] * t) * n)), 0, n - 1);
-            c[a] = c[a] * n + ci;
-            child += int(ci) * stride;
+            const int64_t ci = std::clamp<int64_t>(int64_t(std::floor((p->frame.eye[a] + p->frame.dir[a] * t) * n)), 0, n - 1);
+            child.c[a] = p->c[a] * n + ci;
+            index += int(ci) * stride;
           }
-          address = r.tree_.child_address(node, child);
-          node = r.tree_.node(address);
+          child.address = r.tree_.child_address(p->node, index);
+          child.node = r.tree_.node(child.address);
+          child.scale = p->scale * n;
           ++depth;
-          scale *= n;
-          frame = node_frame(depth, c);
+          child.frame = node_frame(depth, child.c);
+          p = &child;
         }
+        path_size = depth + 1;
+        const uint32_t address = p->address;
+        const Node node = p->node;
+        const NodeFrame& frame = p->frame;
+        const double scale = p->scale;
         if (!node.constant() && !node.has_brick()) want = kWantsBrick;
         // The node's exit along the ray, in the node's frame.
         double t_exit = ray.span.t1;
@@ -702,6 +836,34 @@ class GigaVoxelsRenderer final : public Renderer {
           const double lam = fp <= fine_voxel ? double(fine.depth) : depth_for(fp);
           const double dt_unit = r.step_ * std::max(fp, fine_voxel);
           const double dt = dt_unit / unit_per_t;
+          // A clear cell group (nothing visible in it) is leapt to the first sample position
+          // past it: the samples taken are the ones marching every step would take.
+          double t_leave = kInf, t_next = 0, t_before = 0;
+          float voxel;
+          bool leap = r.p_.skip_cells && clear(lv, lam, t, iso, t_leave, voxel);
+          if (leap) {
+            const double steps = std::ceil((std::max(std::min(t_leave, t_face), t) - t) / dt);
+            leap = iso || steps > 1;  // iso: a clear group's voxel stands in for a sample
+            t_next = t + std::max(steps, 1.0) * dt;
+            t_before = t_next - dt;  // the last position in the group
+          }
+          if (leap && iso) {
+            // Every value in the group is on the voxel's side of every isovalue.
+            if (s.have_prev && crossing(s.prev_value, voxel)) {
+              hit_t = refine_hit(lv, lam, s.prev_t, t, s.prev_value, voxel);
+              finished = true;
+              break;
+            }
+            s.prev_value = voxel, s.prev_t = t_before, s.have_prev = true;
+            t = t_next;
+            continue;
+          }
+          if (leap && !s.have_prev) {  // DVR: the group adds nothing; its last value starts the next segment
+            ++counters.samples;
+            s.prev_value = sample(lv, lam, t_before, nullptr), s.prev_t = t_before, s.have_prev = true;
+            t = t_next;
+            continue;
+          }
           ++counters.samples;
           if (iso) {
             const float v = sample(lv, lam, t, nullptr);
@@ -726,6 +888,12 @@ class GigaVoxelsRenderer final : public Renderer {
               }
             }
             s.prev_value = v, s.prev_t = t, s.have_prev = true;
+            if (leap) {  // this sample closed the segment into the group; its last value starts the next
+              ++counters.samples;
+              s.prev_value = sample(lv, lam, t_before, nullptr), s.prev_t = t_before;
+              t = t_next;
+              continue;
+            }
           }
           t += dt;
         }
@@ -819,6 +987,24 @@ class GigaVoxelsRenderer final : public Renderer {
     }
 
     double eye[3] = {}, dir[3] = {};  // the ray in the unit cube, per unit t
+    /// The last descent, root first.
+    struct PathNode {
+      uint32_t address = 0;
+      Node node;
+      int64_t c[3] = {};  // the node's integer coordinates at its depth
+      double scale = 1;   // N^depth, rounded
+      NodeFrame frame;
+      LevelBrick level;  // data null: no brick
+      bool contains(double t) const {
+        for (int a = 0; a < 3; ++a) {
+          const double u = frame.eye[a] + frame.dir[a] * t;
+          if (!(u >= 0 && u <= 1)) return false;
+        }
+        return true;
+      }
+    };
+    std::vector<PathNode> path;
+    int path_size = 0;
     int hit_surface = -1;
     int face_axis = -1;
     Levels hit_levels;
@@ -840,6 +1026,10 @@ class GigaVoxelsRenderer final : public Renderer {
   double footprint_per_t_ = 0;  // a pixel's footprint per unit distance, unit coordinates, times lod_ratio
   double inv_log_arity_ = 1;
   int n_ = 2, m_ = 32;
+  double inv_m_ = 1.0 / 32;
+  int groups_ = 9;           // cell groups per brick axis
+  size_t group_words_ = 12;  // words of visibility bits per brick
+  std::vector<uint64_t> group_bits_;  // brick_capacity() x group_words_
   gigavoxels::PreintegratedTf preintegrated_;
 
   // Per frame: the feedback buffer and the rays' states, written by the render threads (each
@@ -889,6 +1079,7 @@ BackendEntry gigavoxels_backend() {
       {"amplify_seed", 1, 0, 1e9, "source=2: noise seed"},
       {"max_passes", 256, 1, 100000, "exact mode: passes per frame before the rest of the frame takes coarser data"},
       {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
+      {"skip_cells", 1, 0, 1, "1: rays leap the 4^3-cell groups of a brick that hold nothing visible; 0: every step samples"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
@@ -911,6 +1102,7 @@ BackendEntry gigavoxels_backend() {
     gp.amplify_seed = int(p["amplify_seed"]);
     gp.max_passes = int(p["max_passes"]);
     gp.refine = int(p["refine"]);
+    gp.skip_cells = p["skip_cells"] != 0;
     return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       using Stored = decltype(stored);
       std::unique_ptr<Source> source;
