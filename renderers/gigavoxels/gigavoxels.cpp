@@ -570,11 +570,11 @@ class GigaVoxelsRenderer final : public Renderer {
 
     /// The ray's bricks of the last levels met in the descent, coarsest first.
     struct Levels {
-      LevelBrick b[3];
+      const LevelBrick* b[3] = {};  // in the descent's path: stable until the next descent
       int count = 0;
       void push(const LevelBrick& l) {
         if (count == 3) b[0] = b[1], b[1] = b[2], count = 2;
-        b[count++] = l;
+        b[count++] = &l;
       }
     };
 
@@ -586,13 +586,13 @@ class GigaVoxelsRenderer final : public Renderer {
       double w = 1;
     };
     Blend blend(const Levels& lv, double lambda) const {
-      const LevelBrick& fine = lv.b[lv.count - 1];
+      const LevelBrick& fine = *lv.b[lv.count - 1];
       if (!r.p_.quadrilinear || lv.count == 1 || lambda >= fine.depth) return {nullptr, &fine, 1};
       int i = lv.count - 1;
-      while (i > 0 && lv.b[i - 1].depth > lambda) --i;  // b[i] finer than lambda, b[i-1] coarser
-      if (i == 0) return {nullptr, &lv.b[0], 1};
-      const LevelBrick& coarse = lv.b[i - 1];
-      const LevelBrick& finer = lv.b[i];
+      while (i > 0 && lv.b[i - 1]->depth > lambda) --i;  // b[i] finer than lambda, b[i-1] coarser
+      if (i == 0) return {nullptr, lv.b[0], 1};
+      const LevelBrick& coarse = *lv.b[i - 1];
+      const LevelBrick& finer = *lv.b[i];
       return {&coarse, &finer, std::clamp((lambda - coarse.depth) / double(finer.depth - coarse.depth), 0.0, 1.0)};
     }
 
@@ -607,41 +607,41 @@ class GigaVoxelsRenderer final : public Renderer {
       return float(vc * (1 - bl.w) + vf * bl.w);
     }
 
-    /// Whether the cell group of brick b at t is clear (holds nothing visible); then where
-    /// the ray leaves it and one of its voxels (every value in it is on that voxel's side of
-    /// every isovalue).
+    /// Whether the cell group of brick b at t is clear (holds nothing visible); where the ray
+    /// leaves the group; and, when clear, one of its voxels (every value in the group is on
+    /// that voxel's side of every isovalue).
     bool clear_group(const LevelBrick& b, double t, double& t_leave, float& voxel) const {
       const double top = double(r.m_ + 1);
-      int g[3];
+      unsigned g[3];
       for (int a = 0; a < 3; ++a) {
-        const double l = std::clamp((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5, 0.0, top);
-        g[a] = int(l) / kCellGroup;
+        const double l = std::min(std::max((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5, 0.0), top);
+        g[a] = unsigned(l) / kCellGroup;
       }
-      const int i = (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
-      if ((b.visible_groups[i >> 6] >> (i & 63)) & 1) return false;
       t_leave = kInf;
       for (int a = 0; a < 3; ++a) {
         if (b.frame.dir[a] == 0) continue;
         const double face = double((b.frame.dir[a] > 0 ? g[a] + 1 : g[a]) * kCellGroup);
         t_leave = std::min(t_leave, ((face - 0.5) * r.inv_m_ - b.frame.eye[a]) * b.frame.inv_dir[a]);
       }
-      const int64_t e = r.m_ + 2;
-      voxel = float(b.data[(int64_t(g[2]) * kCellGroup * e + int64_t(g[1]) * kCellGroup) * e + int64_t(g[0]) * kCellGroup]);
+      const unsigned i = (g[2] * unsigned(r.groups_) + g[1]) * unsigned(r.groups_) + g[0];
+      if ((b.visible_groups[i >> 6] >> (i & 63)) & 1) return false;
+      const size_t e = size_t(r.m_) + 2;
+      voxel = float(b.data[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
       return true;
     }
 
-    /// clear_group for what a sample at lambda reads. Two blended levels are clear together
-    /// when both are clear on the same side of every isovalue (DVR: never; both clear could
-    /// still blend to a visible value in between).
+    /// clear_group for what a sample at lambda reads; t_leave is where the answer may change.
+    /// Two blended levels are clear together when both are clear on the same side of every
+    /// isovalue (DVR: never; both clear could still blend to a visible value in between).
     bool clear(const Levels& lv, double lambda, double t, bool iso, double& t_leave, float& voxel) const {
       const Blend bl = blend(lv, lambda);
-      if (!clear_group(*bl.finer, t, t_leave, voxel)) return false;
-      if (!bl.coarse) return true;
+      const bool finer_clear = clear_group(*bl.finer, t, t_leave, voxel);
+      if (!bl.coarse || !finer_clear) return finer_clear;
       double t_coarse;
       float coarse_voxel;
-      if (!iso || !clear_group(*bl.coarse, t, t_coarse, coarse_voxel) || crossing(coarse_voxel, voxel)) return false;
+      const bool coarse_clear = clear_group(*bl.coarse, t, t_coarse, coarse_voxel);
       t_leave = std::min(t_leave, t_coarse);
-      return true;
+      return iso && coarse_clear && !crossing(coarse_voxel, voxel);
     }
 
     void pixel(int x, int y, RayState& s, FrameBuffers& out) {
@@ -820,9 +820,10 @@ class GigaVoxelsRenderer final : public Renderer {
         }
         ++counters.bricks;
         // March the node with a step from the footprint (never finer than the finest level met).
-        const LevelBrick& fine = lv.b[lv.count - 1];
+        const LevelBrick& fine = *lv.b[lv.count - 1];
         const double fine_voxel = 1.0 / (double(r.m_) * fine.scale);
         bool finished = false;
+        double visible_until = -kInf;  // the cell group of the last look showed something
         // Iso: one more sample at the node's exit, so that a crossing in the last part-step is
         // bracketed even when the next node is empty.
         for (bool last = false; !last;) {
@@ -840,7 +841,11 @@ class GigaVoxelsRenderer final : public Renderer {
           // past it: the samples taken are the ones marching every step would take.
           double t_leave = kInf, t_next = 0, t_before = 0;
           float voxel;
-          bool leap = r.p_.skip_cells && clear(lv, lam, t, iso, t_leave, voxel);
+          bool leap = false;
+          if (r.p_.skip_cells && t >= visible_until) {
+            leap = clear(lv, lam, t, iso, t_leave, voxel);
+            if (!leap) visible_until = t_leave;  // no need to look again before
+          }
           if (leap) {
             const double steps = std::ceil((std::max(std::min(t_leave, t_face), t) - t) / dt);
             leap = iso || steps > 1;  // iso: a clear group's voxel stands in for a sample
