@@ -713,13 +713,18 @@ class GigaVoxelsRenderer final : public Renderer {
             restart = i;
             break;
           }
-        for (int i = 0; i < restart; ++i)
-          if (entry_fp * double(r.m_) * path[i].scale >= 1) {
-            restart = i;
-            break;
-          }
-        Levels lv;
-        for (int i = 0; i < restart; ++i)
+        // The footprint grows along the ray: an ancestor may now be fine enough (the test is
+        // monotone in depth, so the deepest says whether any does).
+        if (restart > 0 && entry_fp * double(r.m_) * path[restart - 1].scale >= 1)
+          for (int i = 0; i < restart; ++i)
+            if (entry_fp * double(r.m_) * path[i].scale >= 1) {
+              restart = i;
+              break;
+            }
+        Levels lv;  // the last 3 bricks above the restart, coarsest first
+        int above = restart;
+        for (int found = 0; above > 0 && found < 3; --above) found += path[above - 1].level.data != nullptr;
+        for (int i = above; i < restart; ++i)
           if (path[i].level.data) lv.push(path[i].level);
         PathNode* p = &path[restart];
         if (restart == 0) {
