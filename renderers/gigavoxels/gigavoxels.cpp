@@ -168,8 +168,9 @@ class AmplifiedSource final : public Source {
     producer_ = std::make_unique<gigavoxels::AmplifiedProducer>(
         [this, extent](double ux, double uy, double uz) {
           // Unit cube -> finest voxel centres; the sampler clamps into the volume (the root
-          // brick's padding beyond the last voxel repeats it).
-          std::lock_guard lock(coarse_mutex_);
+          // brick's padding beyond the last voxel repeats it). Only fill() calls the producer,
+          // holding coarse_mutex_ for the whole brick (a lock per voxel cost more than the
+          // trilinear sample).
           return float(coarse_.sample(Vec3d(ux, uy, uz) * extent - Vec3d(0.5)));
         },
         ap);
@@ -202,6 +203,7 @@ class AmplifiedSource final : public Source {
   }
   bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
     if (a.depth > layout_.finest()) {
+      std::lock_guard lock(coarse_mutex_);
       producer_->produce(a, out);
       ++produced_;
       return true;
@@ -263,6 +265,8 @@ class GigaVoxelsRenderer final : public Renderer {
     inv_log_arity_ = 1.0 / std::log(double(n_));
     m_ = source_->brick_size();
     inv_m_ = 1.0 / double(m_);
+    iso_count_ = int(std::min<size_t>(scene_.isosurfaces.size(), std::size(iso_values_)));
+    for (int k = 0; k < iso_count_; ++k) iso_values_[k] = scene_.isosurfaces[size_t(k)].value;
     groups_ = groups_per_axis(m_);
     group_words_ = group_words(m_);
     group_bits_.assign(size_t(tree_.brick_capacity()) * group_words_, 0);
@@ -928,10 +932,13 @@ class GigaVoxelsRenderer final : public Renderer {
       return 0;
     }
 
+    /// Whether going from value a to value b crosses (or lands on) an isovalue; at every
+    /// sample and leap, so from the renderer's array of isovalues.
     bool crossing(float a, float b) const {
-      for (const auto& surface : r.scene_.isosurfaces) {
-        const double ga = a - surface.value, gb = b - surface.value;
-        if ((ga < 0) != (gb < 0) || gb == 0) return true;
+      const double da = a, db = b;
+      for (int k = 0; k < r.iso_count_; ++k) {
+        const double v = r.iso_values_[k];
+        if ((da < v) != (db < v) || db == v) return true;
       }
       return false;
     }
@@ -1037,6 +1044,8 @@ class GigaVoxelsRenderer final : public Renderer {
   double inv_log_arity_ = 1;
   int n_ = 2, m_ = 32;
   double inv_m_ = 1.0 / 32;
+  double iso_values_[4] = {};  // the scene's isovalues (it allows up to 4)
+  int iso_count_ = 0;
   int groups_ = 9;           // cell groups per brick axis
   size_t group_words_ = 12;  // words of visibility bits per brick
   std::vector<uint64_t> group_bits_;  // brick_capacity() x group_words_
