@@ -290,7 +290,7 @@ class GigaVoxelsRenderer final : public Renderer {
     step_ = p.step * factor;
     finest_voxel_unit_ = 1.0 / extent_;  // one finest voxel in unit coordinates (opacity reference)
     tree_.set_root(root_node(), NodeAddress{});
-    if (p.source == 0 && ctx.cache().format().apron < 1)
+    if (p.source != 1 && ctx.cache().format().apron < 1)  // the sponge reads no stored brick
       throw Error(Errc::unsupported, "gigavoxels copies bricks with a 1-voxel border: the store needs an apron of at least 1")
           .with_file(ctx.cache().store().path());
   }

@@ -394,6 +394,32 @@ TEST_F(GigaVoxelsZoom, ADeepZoomIntoTheSpongeSeesTheSameImageAsAShallowOne) {
   }
 }
 
+TEST_F(GigaVoxels, AStoreWithoutApronIsRefusedByNameUnlessNoBrickIsRead) {
+  // Bricks are copied with a 1-voxel border from the store's apron: stored (0) and amplified
+  // (2) sources need one; the sponge (1) reads no stored brick and renders.
+  BuildOptions o;
+  o.brick_size = 8;
+  o.apron = 0;
+  auto ml = make_field_source(make_field("marschner-lobb"), {32, 32, 32}, ValueType::f32);
+  const std::string store = dir_->file("no-apron.store");
+  build_store(*ml, store, o);
+  Scene sc = scene(iso_scene(), 16);
+  sc.dataset = store;
+  for (double source : {0.0, 2.0}) {
+    try {
+      RenderSession g(sc, backend_options("gigavoxels", {{"source", source}}));
+      ADD_FAILURE() << "source " << source << " rendered a store without apron";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("apron"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("no-apron.store"), std::string::npos) << e.what();
+    }
+  }
+  RenderSession sponge(sc, backend_options("gigavoxels", {{"source", 1}, {"menger_brick", 9}, {"exact", 1}}));
+  FrameBuffers fb;
+  sponge.render(0, fb, kAll);
+  EXPECT_TRUE(all_finite(fb));
+}
+
 TEST_F(GigaVoxels, TheImageDoesNotDependOnTheThreadCount) {
   const Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.5})", 48);
   FrameBuffers a, b;
