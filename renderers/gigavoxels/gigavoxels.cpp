@@ -283,6 +283,7 @@ class GigaVoxelsRenderer final : public Renderer {
       extent_ = double(layout.brick_size) * double(int64_t(1) << layout.finest()), unit_offset_ = 0.5;
     }
     scales_ = node_scales(n_, source_->max_depth() + 1);
+    for (const Scale& sc : scales_) inv_scales_.push_back(1.0 / sc.hi);
     if (p.source == 1) outside_value_ = 0.0f;
     if (scene_.mode == RenderMode::dvr) preintegrated_ = gigavoxels::PreintegratedTf(scene_.transfer_function);
     const double factor = scene_.mode == RenderMode::iso ? scene_.quality.step_factor
@@ -695,14 +696,30 @@ class GigaVoxelsRenderer final : public Renderer {
         else whole = hi - double(c[a]);  // an eye this far outside never descends this deep
         f.eye[a] = whole + lo;
         f.dir[a] = dir[a] * s.hi;
-        f.inv_dir[a] = 1.0 / f.dir[a];
+        f.inv_dir[a] = inv_dir[a] * r.inv_scales_[size_t(depth)];
       }
       return f;
     }
 
+    /// The rays of a tile leave one eye in nearby directions, so each starts from the last
+    /// ray's descent: the nodes are this ray's too as far as they contain its start, and the
+    /// eye's part of their frames does not depend on the direction, so only the direction's
+    /// part is redone. Deep in a zoom, a descent from the root would be most of the tree.
+    void aim_path_along_ray() {
+      for (int d = 0; d < path_size; ++d) {
+        PathNode& p = path[size_t(d)];
+        const double s = r.scales_[size_t(d)].hi, inv_s = r.inv_scales_[size_t(d)];
+        for (int a = 0; a < 3; ++a) p.frame.dir[a] = dir[a] * s, p.frame.inv_dir[a] = inv_dir[a] * inv_s;
+        if (p.level.data) p.level.frame = p.frame;
+      }
+    }
+
     void march(const PrimaryRay& ray, RayState& s, gigavoxels::RayRecorder& rec, PixelResult& px) {
       const bool iso = r.scene_.mode == RenderMode::iso;
-      for (int a = 0; a < 3; ++a) eye[a] = (ray.org[a] + r.unit_offset_) / r.extent_, dir[a] = ray.dir[a] / r.extent_;
+      for (int a = 0; a < 3; ++a) {
+        eye[a] = (ray.org[a] + r.unit_offset_) / r.extent_, dir[a] = ray.dir[a] / r.extent_;
+        inv_dir[a] = 1.0 / dir[a];
+      }
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
       const double stop = r.scene_.quality.termination_opacity;
       const int n = r.n_;
@@ -711,7 +728,7 @@ class GigaVoxelsRenderer final : public Renderer {
       Vec3d hit_gradient(0.0);
       bool requested = false;
       int exit_axis = -1;
-      path_size = 0;
+      aim_path_along_ray();
       while (t < ray.span.t1) {
         const double entry_fp = footprint(t);
         // kd-restart: the descent from the root to the node at t whose voxels match the
@@ -1010,8 +1027,8 @@ class GigaVoxelsRenderer final : public Renderer {
       }
     }
 
-    double eye[3] = {}, dir[3] = {};  // the ray in the unit cube, per unit t
-    /// The last descent, root first.
+    double eye[3] = {}, dir[3] = {}, inv_dir[3] = {};  // the ray in the unit cube, per unit t
+    /// The last descent (of this ray, or of the tile's previous ray), root first.
     struct PathNode {
       uint32_t address = 0;
       Node node;
@@ -1045,6 +1062,7 @@ class GigaVoxelsRenderer final : public Renderer {
   std::vector<Voxel> pool_;  // the brick pool's voxels, brick_capacity() x (M + 2)^3
   std::optional<float> outside_value_;  // the value outside the volume, where it is defined
   std::vector<Scale> scales_;  // N^depth
+  std::vector<double> inv_scales_;  // 1 / N^depth, rounded
   double unit_offset_ = 0.5;   // unit = (voxel + unit_offset) / extent
   double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1;
   double footprint_per_t_ = 0;  // a pixel's footprint per unit distance, unit coordinates, times lod_ratio
