@@ -13,8 +13,8 @@
 // request per ray); the ray goes on with coarser data (approximate mode) or stops and resumes
 // after the loader has served the pass (exact mode).
 // Two CPU economies that change no image: a descent resumes from the deepest node of the last
-// one that still contains the new position (the nodes it then passes are the ones a descent
-// from the root would), and inside a brick, rays leap 4^3-cell groups that hold nothing
+// one (the ray's own, or the tile's previous ray's) that still contains the new position (the
+// nodes it then passes are the ones a descent from the root would), and inside a brick, rays leap 4^3-cell groups that hold nothing
 // visible (a bit per group, set when the brick is written) to the first sample position past
 // them.
 // Between frames (end_frame, one thread): compaction, usage stamps, LRU order, then the
