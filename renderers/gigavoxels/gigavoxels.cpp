@@ -749,11 +749,7 @@ class GigaVoxelsRenderer final : public Renderer {
               restart = i;
               break;
             }
-        Levels lv;  // the last 3 bricks above the restart, coarsest first
-        int above = restart;
-        for (int found = 0; above > 0 && found < 3; --above) found += path[above - 1].level.data != nullptr;
-        for (int i = above; i < restart; ++i)
-          if (path[i].level.data) lv.push(path[i].level);
+        Levels lv = restart > 0 ? path[restart - 1].levels : Levels{};  // the last 3 bricks above the restart
         PathNode* p = &path[restart];
         if (restart == 0) {
           p->address = 0;
@@ -771,6 +767,7 @@ class GigaVoxelsRenderer final : public Renderer {
             p->level = {r.brick(p->node.brick()), r.visible_groups(p->node.brick()), depth, p->scale, p->frame};
             lv.push(p->level);
           }
+          p->levels = lv;
           if (p->node.constant()) break;
           if (entry_fp * double(r.m_) * p->scale >= 1) break;  // its voxels cover at most lod_ratio pixels
           if (!p->node.has_children()) {
@@ -1036,6 +1033,7 @@ class GigaVoxelsRenderer final : public Renderer {
       double scale = 1;   // N^depth, rounded
       NodeFrame frame;
       LevelBrick level;  // data null: no brick
+      Levels levels;     // the last 3 bricks down to and including this node's
       bool contains(double t) const {
         for (int a = 0; a < 3; ++a) {
           const double u = frame.eye[a] + frame.dir[a] * t;
