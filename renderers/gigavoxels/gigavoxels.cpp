@@ -602,8 +602,8 @@ class GigaVoxelsRenderer final : public Renderer {
     }
 
     /// Quadrilinear: the two levels around the footprint's depth lambda, among those collected.
-    float sample(const Levels& lv, double lambda, double t, Vec3d* gradient) const {
-      const Blend bl = blend(lv, lambda);
+    float sample(const Levels& lv, double lambda, double t, Vec3d* gradient) const { return sample(blend(lv, lambda), t, gradient); }
+    float sample(const Blend& bl, double t, Vec3d* gradient) const {
       if (!bl.coarse) return sample_brick(*bl.finer, t, gradient);
       Vec3d gc(0.0), gf(0.0);
       const float vc = sample_brick(*bl.coarse, t, gradient ? &gc : nullptr);
@@ -638,8 +638,7 @@ class GigaVoxelsRenderer final : public Renderer {
     /// clear_group for what a sample at lambda reads; t_leave is where the answer may change.
     /// Two blended levels are clear together when both are clear on the same side of every
     /// isovalue (DVR: never; both clear could still blend to a visible value in between).
-    bool clear(const Levels& lv, double lambda, double t, bool iso, double& t_leave, float& voxel) const {
-      const Blend bl = blend(lv, lambda);
+    bool clear(const Blend& bl, double t, bool iso, double& t_leave, float& voxel) const {
       const bool finer_clear = clear_group(*bl.finer, t, t_leave, voxel);
       if (!bl.coarse || !finer_clear) return finer_clear;
       double t_coarse;
@@ -867,13 +866,14 @@ class GigaVoxelsRenderer final : public Renderer {
           const double lam = fp <= fine_voxel ? double(fine.depth) : depth_for(fp);
           const double dt_unit = r.step_ * std::max(fp, fine_voxel);
           const double dt = dt_unit / unit_per_t;
+          const Blend bl = blend(lv, lam);
           // A clear cell group (nothing visible in it) is leapt to the first sample position
           // past it: the samples taken are the ones marching every step would take.
           double t_leave = kInf, t_next = 0, t_before = 0;
           float voxel;
           bool leap = false;
           if (r.p_.skip_cells && t >= visible_until) {
-            leap = clear(lv, lam, t, iso, t_leave, voxel);
+            leap = clear(bl, t, iso, t_leave, voxel);
             if (!leap) visible_until = t_leave;  // no need to look again before
           }
           if (leap) {
@@ -895,13 +895,13 @@ class GigaVoxelsRenderer final : public Renderer {
           }
           if (leap && !s.have_prev) {  // DVR: the group adds nothing; its last value starts the next segment
             ++counters.samples;
-            s.prev_value = sample(lv, lam, t_before, nullptr), s.prev_t = t_before, s.have_prev = true;
+            s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before, s.have_prev = true;
             t = t_next;
             continue;
           }
           ++counters.samples;
           if (iso) {
-            const float v = sample(lv, lam, t, nullptr);
+            const float v = sample(bl, t, nullptr);
             if (s.have_prev && crossing(s.prev_value, v)) {
               hit_t = refine_hit(lv, lam, s.prev_t, t, s.prev_value, v);
               finished = true;
@@ -910,7 +910,7 @@ class GigaVoxelsRenderer final : public Renderer {
             s.prev_value = v, s.prev_t = t, s.have_prev = true;
           } else {
             Vec3d g(0.0);
-            const float v = sample(lv, lam, t, gradients ? &g : nullptr);
+            const float v = sample(bl, t, gradients ? &g : nullptr);
             if (s.have_prev) {
               const double seg = std::min(dt, t - s.prev_t);
               Vec3f col;
@@ -925,7 +925,7 @@ class GigaVoxelsRenderer final : public Renderer {
             s.prev_value = v, s.prev_t = t, s.have_prev = true;
             if (leap) {  // this sample closed the segment into the group; its last value starts the next
               ++counters.samples;
-              s.prev_value = sample(lv, lam, t_before, nullptr), s.prev_t = t_before;
+              s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before;
               t = t_next;
               continue;
             }
