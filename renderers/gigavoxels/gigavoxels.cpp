@@ -14,9 +14,9 @@
 // after the loader has served the pass (exact mode).
 // Two CPU economies that change no image: a descent resumes from the deepest node of the last
 // one (the ray's own, or the tile's previous ray's) that still contains the new position (the
-// nodes it then passes are the ones a descent from the root would), and inside a brick, rays leap 4^3-cell groups that hold nothing
-// visible (a bit per group, set when the brick is written) to the first sample position past
-// them.
+// nodes it then passes are the ones a descent from the root would), and inside a brick, rays
+// leap 4^3-cell groups that hold nothing visible (a bit per group, set when the brick is
+// written) to the first sample position past them.
 // Between frames (end_frame, one thread): compaction, usage stamps, LRU order, then the
 // requests within the per-frame budgets.
 
@@ -535,13 +535,36 @@ class GigaVoxelsRenderer final : public Renderer {
     double inv_dir[3] = {};  // 1 / dir (infinite along an axis the ray is parallel to)
   };
 
-  /// A brick as a sample sees it: the pool slot, its node's depth and frame.
-  struct LevelBrick {
-    const Voxel* data = nullptr;
-    const uint64_t* visible_groups = nullptr;  // one bit per cell group (kCellGroup)
-    int depth = -1;
+  struct PathNode;
+  /// The ray's bricks of the last levels met in the descent, coarsest first: nodes of its
+  /// path, stable until the next descent.
+  struct Levels {
+    const PathNode* b[3] = {};
+    int count = 0;
+    void push(const PathNode& l) {
+      if (count == 3) b[0] = b[1], b[1] = b[2], count = 2;
+      b[count++] = &l;
+    }
+  };
+
+  /// A node of a ray's descent, and its brick as a sample sees it.
+  struct PathNode {
+    uint32_t address = 0;
+    Node node;
+    int64_t c[3] = {};  // the node's integer coordinates at its depth
+    int depth = 0;
     double scale = 1;  // N^depth, rounded (voxel sizes and gradients only)
     NodeFrame frame;
+    const Voxel* brick = nullptr;              // null: no brick
+    const uint64_t* visible_groups = nullptr;  // one bit per cell group (kCellGroup)
+    Levels levels;  // the last 3 bricks down to and including this node's
+    bool contains(double t) const {
+      for (int a = 0; a < 3; ++a) {
+        const double u = frame.eye[a] + frame.dir[a] * t;
+        if (!(u >= 0 && u <= 1)) return false;
+      }
+      return true;
+    }
   };
 
   struct Tracer {
@@ -555,7 +578,7 @@ class GigaVoxelsRenderer final : public Renderer {
           path(size_t(r.source_->max_depth()) + 1) {}
 
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t.
-    float sample_brick(const LevelBrick& b, double t, Vec3d* gradient) const {
+    float sample_brick(const PathNode& b, double t, Vec3d* gradient) const {
       const int64_t e = r.m_ + 2;
       const float top = float(e - 1);
       int64_t cell[3];
@@ -565,7 +588,7 @@ class GigaVoxelsRenderer final : public Renderer {
         cell[a] = std::min<int64_t>(int64_t(l), e - 2);
         u[a] = l - float(cell[a]);
       }
-      const Voxel* q = b.data + (cell[2] * e + cell[1]) * e + cell[0];
+      const Voxel* q = b.brick + (cell[2] * e + cell[1]) * e + cell[0];
       const int64_t dy = e, dz = e * e;
       const float c[8] = {float(q[0]),  float(q[1]),  float(q[dy]),      float(q[dy + 1]),
                           float(q[dz]), float(q[dz + 1]), float(q[dz + dy]), float(q[dz + dy + 1])};
@@ -573,31 +596,21 @@ class GigaVoxelsRenderer final : public Renderer {
       return trilinear(c, u[0], u[1], u[2]);
     }
 
-    /// The ray's bricks of the last levels met in the descent, coarsest first.
-    struct Levels {
-      const LevelBrick* b[3] = {};  // in the descent's path: stable until the next descent
-      int count = 0;
-      void push(const LevelBrick& l) {
-        if (count == 3) b[0] = b[1], b[1] = b[2], count = 2;
-        b[count++] = &l;
-      }
-    };
-
     /// The bricks a sample at depth lambda reads: one, or (quadrilinear) the two levels around
     /// lambda among those collected, blended with weight w on the finer.
     struct Blend {
-      const LevelBrick* coarse = nullptr;  // null: `finer` alone
-      const LevelBrick* finer = nullptr;
+      const PathNode* coarse = nullptr;  // null: `finer` alone
+      const PathNode* finer = nullptr;
       double w = 1;
     };
     Blend blend(const Levels& lv, double lambda) const {
-      const LevelBrick& fine = *lv.b[lv.count - 1];
+      const PathNode& fine = *lv.b[lv.count - 1];
       if (!r.p_.quadrilinear || lv.count == 1 || lambda >= fine.depth) return {nullptr, &fine, 1};
       int i = lv.count - 1;
       while (i > 0 && lv.b[i - 1]->depth > lambda) --i;  // b[i] finer than lambda, b[i-1] coarser
       if (i == 0) return {nullptr, lv.b[0], 1};
-      const LevelBrick& coarse = *lv.b[i - 1];
-      const LevelBrick& finer = *lv.b[i];
+      const PathNode& coarse = *lv.b[i - 1];
+      const PathNode& finer = *lv.b[i];
       return {&coarse, &finer, std::clamp((lambda - coarse.depth) / double(finer.depth - coarse.depth), 0.0, 1.0)};
     }
 
@@ -615,7 +628,7 @@ class GigaVoxelsRenderer final : public Renderer {
     /// Whether the cell group of brick b at t is clear (holds nothing visible); where the ray
     /// leaves the group; and, when clear, one of its voxels (every value in the group is on
     /// that voxel's side of every isovalue).
-    bool clear_group(const LevelBrick& b, double t, double& t_leave, float& voxel) const {
+    bool clear_group(const PathNode& b, double t, double& t_leave, float& voxel) const {
       const double top = double(r.m_ + 1);
       unsigned g[3];
       for (int a = 0; a < 3; ++a) {
@@ -631,7 +644,7 @@ class GigaVoxelsRenderer final : public Renderer {
       const unsigned i = (g[2] * unsigned(r.groups_) + g[1]) * unsigned(r.groups_) + g[0];
       if ((b.visible_groups[i >> 6] >> (i & 63)) & 1) return false;
       const size_t e = size_t(r.m_) + 2;
-      voxel = float(b.data[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
+      voxel = float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
       return true;
     }
 
@@ -694,10 +707,14 @@ class GigaVoxelsRenderer final : public Renderer {
         else if (std::abs(hi) < 0x1p62) whole = double(int64_t(hi) - c[a]);  // hi is an integer here
         else whole = hi - double(c[a]);  // an eye this far outside never descends this deep
         f.eye[a] = whole + lo;
-        f.dir[a] = dir[a] * s.hi;
-        f.inv_dir[a] = inv_dir[a] * r.inv_scales_[size_t(depth)];
       }
+      aim(f, depth);
       return f;
+    }
+    /// The ray's direction in the frame of a node at a depth.
+    void aim(NodeFrame& f, int depth) const {
+      const double s = r.scales_[size_t(depth)].hi, inv_s = r.inv_scales_[size_t(depth)];
+      for (int a = 0; a < 3; ++a) f.dir[a] = dir[a] * s, f.inv_dir[a] = inv_dir[a] * inv_s;
     }
 
     /// The rays of a tile leave one eye in nearby directions, so each starts from the last
@@ -705,12 +722,7 @@ class GigaVoxelsRenderer final : public Renderer {
     /// eye's part of their frames does not depend on the direction, so only the direction's
     /// part is redone. Deep in a zoom, a descent from the root would be most of the tree.
     void aim_path_along_ray() {
-      for (int d = 0; d < path_size; ++d) {
-        PathNode& p = path[size_t(d)];
-        const double s = r.scales_[size_t(d)].hi, inv_s = r.inv_scales_[size_t(d)];
-        for (int a = 0; a < 3; ++a) p.frame.dir[a] = dir[a] * s, p.frame.inv_dir[a] = inv_dir[a] * inv_s;
-        if (p.level.data) p.level.frame = p.frame;
-      }
+      for (int d = 0; d < path_size; ++d) aim(path[size_t(d)].frame, d);
     }
 
     void march(const PrimaryRay& ray, RayState& s, gigavoxels::RayRecorder& rec, PixelResult& px) {
@@ -754,6 +766,7 @@ class GigaVoxelsRenderer final : public Renderer {
           p->address = 0;
           p->node = r.tree_.node(0);
           p->c[0] = p->c[1] = p->c[2] = 0;
+          p->depth = 0;
           p->scale = 1;
           p->frame = node_frame(0, p->c);
         }
@@ -761,10 +774,10 @@ class GigaVoxelsRenderer final : public Renderer {
         uint32_t want = 0;
         for (;;) {
           ++counters.nodes;
-          p->level.data = nullptr;
+          p->brick = nullptr;
           if (p->node.has_brick()) {
-            p->level = {r.brick(p->node.brick()), r.visible_groups(p->node.brick()), depth, p->scale, p->frame};
-            lv.push(p->level);
+            p->brick = r.brick(p->node.brick()), p->visible_groups = r.visible_groups(p->node.brick());
+            lv.push(*p);
           }
           p->levels = lv;
           if (p->node.constant()) break;
@@ -783,7 +796,7 @@ class GigaVoxelsRenderer final : public Renderer {
           child.address = r.tree_.child_address(p->node, index);
           child.node = r.tree_.node(child.address);
           child.scale = p->scale * n;
-          ++depth;
+          child.depth = ++depth;
           child.frame = node_frame(depth, child.c);
           p = &child;
         }
@@ -849,7 +862,7 @@ class GigaVoxelsRenderer final : public Renderer {
         }
         ++counters.bricks;
         // March the node with a step from the footprint (never finer than the finest level met).
-        const LevelBrick& fine = *lv.b[lv.count - 1];
+        const PathNode& fine = *lv.b[lv.count - 1];
         const double fine_voxel = 1.0 / (double(r.m_) * fine.scale);
         bool finished = false;
         double visible_until = -kInf;  // the cell group of the last look showed something
@@ -1026,22 +1039,6 @@ class GigaVoxelsRenderer final : public Renderer {
 
     double eye[3] = {}, dir[3] = {}, inv_dir[3] = {};  // the ray in the unit cube, per unit t
     /// The last descent (of this ray, or of the tile's previous ray), root first.
-    struct PathNode {
-      uint32_t address = 0;
-      Node node;
-      int64_t c[3] = {};  // the node's integer coordinates at its depth
-      double scale = 1;   // N^depth, rounded
-      NodeFrame frame;
-      LevelBrick level;  // data null: no brick
-      Levels levels;     // the last 3 bricks down to and including this node's
-      bool contains(double t) const {
-        for (int a = 0; a < 3; ++a) {
-          const double u = frame.eye[a] + frame.dir[a] * t;
-          if (!(u >= 0 && u <= 1)) return false;
-        }
-        return true;
-      }
-    };
     std::vector<PathNode> path;
     int path_size = 0;
     int hit_surface = -1;
