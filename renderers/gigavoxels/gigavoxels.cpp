@@ -265,8 +265,6 @@ class GigaVoxelsRenderer final : public Renderer {
     inv_log2_arity_ = 1.0 / std::log2(double(n_));
     m_ = source_->brick_size();
     inv_m_ = 1.0 / double(m_);
-    iso_count_ = int(std::min<size_t>(scene_.isosurfaces.size(), std::size(iso_values_)));
-    for (int k = 0; k < iso_count_; ++k) iso_values_[k] = scene_.isosurfaces[size_t(k)].value;
     groups_ = groups_per_axis(m_);
     group_words_ = group_words(m_);
     group_bits_.assign(size_t(tree_.brick_capacity()) * group_words_, 0);
@@ -966,14 +964,11 @@ class GigaVoxelsRenderer final : public Renderer {
       return 0;
     }
 
-    /// Whether going from value a to value b crosses (or lands on) an isovalue; at every
-    /// sample and leap, so from the renderer's array of isovalues.
+    /// Whether going from value a to value b crosses (or lands on) an isovalue.
     bool crossing(float a, float b) const {
       const double da = a, db = b;
-      for (int k = 0; k < r.iso_count_; ++k) {
-        const double v = r.iso_values_[k];
-        if ((da < v) != (db < v) || db == v) return true;
-      }
+      for (const auto& surface : r.scene_.isosurfaces)
+        if ((da < surface.value) != (db < surface.value) || db == surface.value) return true;
       return false;
     }
 
@@ -1064,8 +1059,6 @@ class GigaVoxelsRenderer final : public Renderer {
   double inv_log2_arity_ = 1;
   int n_ = 2, m_ = 32;
   double inv_m_ = 1.0 / 32;
-  double iso_values_[4] = {};  // the scene's isovalues (it allows up to 4)
-  int iso_count_ = 0;
   int groups_ = 9;           // cell groups per brick axis
   size_t group_words_ = 12;  // words of visibility bits per brick
   std::vector<uint64_t> group_bits_;  // brick_capacity() x group_words_
