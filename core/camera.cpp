@@ -20,14 +20,12 @@ void Camera::basis(Vec3d& forward, Vec3d& right, Vec3d& true_up) const {
   true_up = cross(right, forward);
 }
 
-Rayd Camera::ray(double px, double py, int width, int height) const {
-  Vec3d f, r, u;
-  basis(f, r, u);
-  const double t = std::tan(fov_degrees * kPi / 360.0);
-  const double aspect = double(width) / double(height);
-  const double sx = (2.0 * px / width - 1.0) * t * aspect;
-  const double sy = (1.0 - 2.0 * py / height) * t;
-  return {eye, normalize(f + r * sx + u * sy)};
+Rayd Camera::ray(double px, double py, int width, int height) const { return ImageRays(*this, width, height).ray(px, py); }
+
+ImageRays::ImageRays(const Camera& camera, int width, int height)
+    : eye_(camera.eye), tan_half_fov_(std::tan(camera.fov_degrees * kPi / 360.0)), aspect_(double(width) / double(height)),
+      width_(width), height_(height) {
+  camera.basis(forward_, right_, up_);
 }
 
 double Camera::projected_pixels(double size, double distance, int height) const {

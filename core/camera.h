@@ -20,7 +20,7 @@ struct Camera {
   /// @brief Orthonormal basis: forward (towards the target), right, and true up.
   void basis(Vec3d& forward, Vec3d& right, Vec3d& true_up) const;
   /// @brief Primary ray through pixel (px, py) of a width x height image (pixel centres at +0.5,
-  /// row 0 at the top); the direction is normalised.
+  /// row 0 at the top); the direction is normalised. For many rays, ImageRays.
   Rayd ray(double px, double py, int width, int height) const;
   /// @brief Size in pixels of an object of world size `size` at distance `distance`.
   double projected_pixels(double size, double distance, int height) const;
@@ -29,6 +29,23 @@ struct Camera {
   bool may_see(const Box3d& box, int width, int height) const;
   /// @brief Maps a camera from normalised volume coordinates into world coordinates.
   Camera in_box(const Box3d& world) const;
+};
+
+/// @brief The primary rays of one width x height image: the camera's basis and field of view
+/// computed once, so a ray costs a normalisation. ray() is Camera::ray, to the last bit.
+class ImageRays {
+ public:
+  ImageRays(const Camera& camera, int width, int height);
+  Rayd ray(double px, double py) const {
+    const double sx = (2.0 * px / width_ - 1.0) * tan_half_fov_ * aspect_;
+    const double sy = (1.0 - 2.0 * py / height_) * tan_half_fov_;
+    return {eye_, normalize(forward_ + right_ * sx + up_ * sy)};
+  }
+
+ private:
+  Vec3d eye_, forward_, right_, up_;
+  double tan_half_fov_, aspect_;
+  int width_, height_;
 };
 
 /// @brief Keyframes interpolated with Catmull-Rom splines over `frames` frames.

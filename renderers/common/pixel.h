@@ -32,9 +32,9 @@ struct PrimaryRay {
   bool hits() const { return !span.empty() && std::isfinite(span.t1); }
 };
 
-inline PrimaryRay primary_ray(const FrameSetup& setup, const VolumeGeometry& geo, int x, int y) {
+inline PrimaryRay primary_ray(const ImageRays& rays, const VolumeGeometry& geo, int x, int y) {
   PrimaryRay r;
-  r.world = setup.camera.ray(x + 0.5, y + 0.5, setup.width, setup.height);
+  r.world = rays.ray(x + 0.5, y + 0.5);
   r.org = geo.to_voxel(r.world.org);
   r.dir = r.world.dir / geo.spacing;
   r.span = intersect(Rayd(r.org, r.dir), geo.voxel_clip);

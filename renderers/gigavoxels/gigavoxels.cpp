@@ -568,11 +568,12 @@ class GigaVoxelsRenderer final : public Renderer {
   struct Tracer {
     const GigaVoxelsRenderer& r;
     const FrameSetup& setup;
+    const ImageRays rays;
     RayCounters& counters;
     const bool gradients;
 
     Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
-        : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
+        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
           path(size_t(r.source_->max_depth()) + 1) {}
 
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t.
@@ -661,7 +662,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
     void pixel(int x, int y, RayState& s, FrameBuffers& out) {
       ++counters.rays;
-      const PrimaryRay ray = primary_ray(setup, r.geo_, x, y);
+      const PrimaryRay ray = primary_ray(rays, r.geo_, x, y);
       gigavoxels::RayRecorder rec = r.uses_->recorder(x, y);
       PixelResult px;
       px.color = r.scene_.background;

@@ -392,11 +392,12 @@ class GobbettiRenderer final : public Renderer {
   struct Tracer {
     const GobbettiRenderer& r;
     const FrameSetup& setup;
+    const ImageRays rays;
     RayCounters& counters;
     const bool gradients;
 
     Tracer(const GobbettiRenderer& renderer, const FrameSetup& s, RayCounters& c)
-        : r(renderer), setup(s), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)) {}
+        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
     /// A data leaf's brick as the ray sees it: the ray in the brick's local coordinates
     /// (level voxels, apron included), l(t) = lo + ld t, sampled in single precision with the
@@ -449,7 +450,7 @@ class GobbettiRenderer final : public Renderer {
 
     void pixel(int x, int y, FrameBuffers& out) {
       ++counters.rays;
-      const PrimaryRay ray = primary_ray(setup, r.geo_, x, y);
+      const PrimaryRay ray = primary_ray(rays, r.geo_, x, y);
       PixelResult px;
       px.color = r.scene_.background;
       double occlusion = kInf;

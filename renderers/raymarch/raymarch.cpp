@@ -51,12 +51,13 @@ class RaymarchRenderer final : public Renderer {
   struct Marcher {
     const RaymarchRenderer& r;
     const FrameSetup& setup;
+    const ImageRays rays;
     RayCounters& counters;
     TrilinearSampler<Stored, float> sampler;
     const bool gradients;
 
     Marcher(const RaymarchRenderer& renderer, const FrameSetup& s, RayCounters& c)
-        : r(renderer), setup(s), counters(c), sampler(r.ctx_.cache(), c, r.finest_), gradients(r.ctx_.needs_gradients(s.outputs)) {}
+        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), sampler(r.ctx_.cache(), c, r.finest_), gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
     /// Calls f(t) at every fixed sample position t0 + (k + 1/2) dt inside a visible brick,
     /// in order, until f returns false. `entered(t)` is called when the ray enters a visible
@@ -108,7 +109,7 @@ class RaymarchRenderer final : public Renderer {
 
     void pixel(int x, int y, FrameBuffers& out) {
       ++counters.rays;
-      const PrimaryRay ray = primary_ray(setup, r.geo_, x, y);
+      const PrimaryRay ray = primary_ray(rays, r.geo_, x, y);
       PixelResult px;
       px.color = r.scene_.background;
       if (ray.hits()) {

@@ -101,6 +101,7 @@ class ReferenceRenderer final : public Renderer {
   struct Tracer {
     const ReferenceRenderer& r;
     const FrameSetup& setup;
+    const ImageRays rays;
     RayCounters& counters;
     CellAccessor<Stored> cells;
     TrilinearSampler<Stored, double> sampler;
@@ -109,7 +110,7 @@ class ReferenceRenderer final : public Renderer {
     bool visible = true;
 
     Tracer(const ReferenceRenderer& renderer, const FrameSetup& s, RayCounters& c)
-        : r(renderer), setup(s), counters(c), cells(r.ctx_.cache(), c, r.finest_), sampler(r.ctx_.cache(), c, r.finest_),
+        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), cells(r.ctx_.cache(), c, r.finest_), sampler(r.ctx_.cache(), c, r.finest_),
           gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
     /// Whether the brick holding cell (i, j, k) can contribute (node table): others are never fetched.
@@ -125,7 +126,7 @@ class ReferenceRenderer final : public Renderer {
 
     void pixel(int x, int y, FrameBuffers& out) {
       ++counters.rays;
-      const PrimaryRay ray = primary_ray(setup, r.geo_, x, y);
+      const PrimaryRay ray = primary_ray(rays, r.geo_, x, y);
       PixelResult px;
       px.color = r.scene_.background;
       if (ray.hits()) {
