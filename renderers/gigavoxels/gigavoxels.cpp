@@ -15,8 +15,8 @@
 // Two CPU economies that change no image: a descent resumes from the deepest node of the last
 // one (the ray's own, or the tile's previous ray's) that still contains the new position (the
 // nodes it then passes are the ones a descent from the root would), and inside a brick, rays
-// leap 4^3-cell groups that hold nothing visible (a bit per group, set when the brick is
-// written) to the first sample position past them.
+// leap the 4^3-cell groups that hold nothing visible, as many at once as their distance to a
+// visible group allows (cell_groups.h), to the first sample position past them.
 // Between frames (end_frame, one thread): compaction, usage stamps, LRU order, then the
 // requests within the per-frame budgets.
 
@@ -36,6 +36,7 @@
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
+#include "renderers/gigavoxels/cell_groups.h"
 #include "renderers/gigavoxels/feedback.h"
 #include "renderers/gigavoxels/node_tree.h"
 #include "renderers/gigavoxels/preintegrated.h"
@@ -75,13 +76,7 @@ struct GigaVoxelsParams {
   bool skip_cells = true;      // leap the cells of a brick that hold nothing visible
 };
 
-/// Empty-space skipping inside a brick: the brick's trilinear cells grouped into cubes of
-/// kCellGroup^3, one bit each, set when the group's voxel values could show something (an
-/// isovalue within their range, or a visible stretch of the transfer function). Trilinear
-/// interpolation stays within its corners' range, so a ray crosses a clear group without a
-/// sample. The paper skips only whole constant nodes; with M = 32 nearly every brick a surface
-/// passes through is visible, and most of its cells are not.
-constexpr int kCellGroup = 4;
+using gigavoxels::kCellGroup;
 
 /// Where bricks come from: the store through the cache, or a procedural producer.
 class Source {
@@ -266,8 +261,8 @@ class GigaVoxelsRenderer final : public Renderer {
     m_ = source_->brick_size();
     inv_m_ = 1.0 / double(m_);
     groups_ = groups_per_axis(m_);
-    group_words_ = group_words(m_);
-    group_bits_.assign(size_t(tree_.brick_capacity()) * group_words_, 0);
+    group_count_ = group_count(m_);
+    group_distances_.assign(size_t(tree_.brick_capacity()) * group_count_, 0);
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -373,29 +368,28 @@ class GigaVoxelsRenderer final : public Renderer {
 
   const NodeTree& tree() const { return tree_; }
   const Voxel* brick(uint32_t slot) const { return pool_.data() + size_t(slot) * tree_.brick_values(); }
-  const uint64_t* visible_groups(uint32_t slot) const { return group_bits_.data() + size_t(slot) * group_words_; }
+  const uint8_t* group_distances(uint32_t slot) const { return group_distances_.data() + size_t(slot) * group_count_; }
 
  private:
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
     const uint64_t e = uint64_t(s.brick_size() + 2);
-    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_words(s.brick_size()) * sizeof(uint64_t);
+    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_count(s.brick_size());
     return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / slot_bytes, 8, 1u << 20));
   }
   /// Cell groups per axis: the cells start at sample coordinates 0 .. M (M + 1 of them, the
   /// border included), kCellGroup to a group.
   static int groups_per_axis(int m) { return m / kCellGroup + 1; }
-  static size_t group_words(int m) {
+  static size_t group_count(int m) {
     const size_t g = size_t(groups_per_axis(m));
-    return (g * g * g + 63) / 64;
+    return g * g * g;
   }
 
-  /// Sets the visibility bits of a freshly written brick: a group shows something when the
+  /// Sets the group distances of a freshly written brick: a group shows something when the
   /// range of its voxels (the corners of its cells, up to the brick's last voxel) does.
   void mark_visible_groups(uint32_t slot) {
     const Voxel* v = brick(slot);
-    uint64_t* bits = group_bits_.data() + size_t(slot) * group_words_;
-    std::fill_n(bits, group_words_, 0);
+    uint8_t* distance = group_distances_.data() + size_t(slot) * group_count_;
     const int e = m_ + 2;
     for (int gz = 0, i = 0; gz < groups_; ++gz)
       for (int gy = 0; gy < groups_; ++gy)
@@ -408,8 +402,9 @@ class GigaVoxelsRenderer final : public Renderer {
                 lo = std::min(lo, float(row[x])), hi = std::max(hi, float(row[x]));
             }
           // NaN (never stored: the importers refuse it) would compare false: kept visible.
-          if (!(lo <= hi) || scene_.value_range_visible(lo, hi)) bits[i >> 6] |= uint64_t(1) << (i & 63);
+          distance[i] = !(lo <= hi) || scene_.value_range_visible(lo, hi) ? 0 : 1;
         }
+    gigavoxels::chessboard_distances(groups_, distance);
   }
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
@@ -554,7 +549,7 @@ class GigaVoxelsRenderer final : public Renderer {
     double scale = 1;  // N^depth, rounded (voxel sizes and gradients only)
     NodeFrame frame;
     const Voxel* brick = nullptr;              // null: no brick
-    const uint64_t* visible_groups = nullptr;  // one bit per cell group (kCellGroup)
+    const uint8_t* group_distances = nullptr;  // per cell group (cell_groups.h)
     Levels levels;  // the last 3 bricks down to and including this node's
     bool contains(double t) const {
       for (int a = 0; a < 3; ++a) {
@@ -625,23 +620,24 @@ class GigaVoxelsRenderer final : public Renderer {
     }
 
     /// Whether the cell group of brick b at t is clear (holds nothing visible); where the ray
-    /// leaves the group; and, when clear, one of its voxels (every value in the group is on
-    /// that voxel's side of every isovalue).
+    /// leaves it, or when clear, the cube of clear groups around it; and, when clear, one of its
+    /// voxels (every value in the cube is on that voxel's side of every isovalue).
     bool clear_group(const PathNode& b, double t, double& t_leave, float& voxel) const {
       const double top = double(r.m_ + 1);
-      unsigned g[3];
+      int g[3];
       for (int a = 0; a < 3; ++a) {
         const double l = std::min(std::max((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5, 0.0), top);
-        g[a] = unsigned(l) / kCellGroup;
+        g[a] = int(l) / kCellGroup;
       }
+      const int i = (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
+      const int reach = std::max(int(b.group_distances[i]) - 1, 0);  // clear groups on every side
       t_leave = kInf;
       for (int a = 0; a < 3; ++a) {
         if (b.frame.dir[a] == 0) continue;
-        const double face = double((b.frame.dir[a] > 0 ? g[a] + 1 : g[a]) * kCellGroup);
+        const double face = double((b.frame.dir[a] > 0 ? g[a] + reach + 1 : g[a] - reach) * kCellGroup);
         t_leave = std::min(t_leave, ((face - 0.5) * r.inv_m_ - b.frame.eye[a]) * b.frame.inv_dir[a]);
       }
-      const unsigned i = (g[2] * unsigned(r.groups_) + g[1]) * unsigned(r.groups_) + g[0];
-      if ((b.visible_groups[i >> 6] >> (i & 63)) & 1) return false;
+      if (b.group_distances[i] == 0) return false;
       const size_t e = size_t(r.m_) + 2;
       voxel = float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
       return true;
@@ -775,7 +771,7 @@ class GigaVoxelsRenderer final : public Renderer {
           ++counters.nodes;
           p->brick = nullptr;
           if (p->node.has_brick()) {
-            p->brick = r.brick(p->node.brick()), p->visible_groups = r.visible_groups(p->node.brick());
+            p->brick = r.brick(p->node.brick()), p->group_distances = r.group_distances(p->node.brick());
             lv.push(*p);
           }
           p->levels = lv;
@@ -879,8 +875,9 @@ class GigaVoxelsRenderer final : public Renderer {
           const double dt_unit = r.step_ * std::max(fp, fine_voxel);
           const double dt = dt_unit / unit_per_t;
           const Blend bl = blend(lv, lam);
-          // A clear cell group (nothing visible in it) is leapt to the first sample position
-          // past it: the samples taken are the ones marching every step would take.
+          // A clear cell group (nothing visible in it), and the clear groups around it, are
+          // leapt to the first sample position past them: the samples taken are the ones
+          // marching every step would take.
           double t_leave = kInf, t_next = 0, t_before = 0;
           float voxel;
           bool leap = false;
@@ -892,10 +889,10 @@ class GigaVoxelsRenderer final : public Renderer {
             const double steps = std::ceil((std::max(std::min(t_leave, t_face), t) - t) / dt);
             leap = iso || steps > 1;  // iso: a clear group's voxel stands in for a sample
             t_next = t + std::max(steps, 1.0) * dt;
-            t_before = t_next - dt;  // the last position in the group
+            t_before = t_next - dt;  // the last position in the clear groups
           }
           if (leap && iso) {
-            // Every value in the group is on the voxel's side of every isovalue.
+            // Every value in the clear groups is on the voxel's side of every isovalue.
             if (s.have_prev && crossing(s.prev_value, voxel)) {
               hit_t = refine_hit(lv, lam, s.prev_t, t, s.prev_value, voxel);
               finished = true;
@@ -1060,9 +1057,9 @@ class GigaVoxelsRenderer final : public Renderer {
   double inv_log2_arity_ = 1;
   int n_ = 2, m_ = 32;
   double inv_m_ = 1.0 / 32;
-  int groups_ = 9;           // cell groups per brick axis
-  size_t group_words_ = 12;  // words of visibility bits per brick
-  std::vector<uint64_t> group_bits_;  // brick_capacity() x group_words_
+  int groups_ = 9;            // cell groups per brick axis
+  size_t group_count_ = 729;  // cell groups per brick
+  std::vector<uint8_t> group_distances_;  // brick_capacity() x group_count_
   gigavoxels::PreintegratedTf preintegrated_;
 
   // Per frame: the feedback buffer and the rays' states, written by the render threads (each
@@ -1112,7 +1109,8 @@ BackendEntry gigavoxels_backend() {
       {"amplify_seed", 1, 0, 1e9, "source=2: noise seed"},
       {"max_passes", 256, 1, 100000, "exact mode: passes per frame before the rest of the frame takes coarser data"},
       {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
-      {"skip_cells", 1, 0, 1, "1: rays leap the 4^3-cell groups of a brick that hold nothing visible; 0: every step samples"},
+      {"skip_cells", 1, 0, 1, "1: rays leap the 4^3-cell groups of a brick that hold nothing visible, as many at once as "
+                              "their distance to a visible group allows; 0: every step samples"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
