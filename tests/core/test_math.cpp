@@ -23,6 +23,26 @@ TEST(Vec3, ArithmeticAndProducts) {
   EXPECT_EQ(volume(Vec3s(2048, 2048, 2048)), int64_t(1) << 33);
 }
 
+TEST(Log2Fast, MatchesTheLibraryAcrossTheDoubleRange) {
+  // Every binade's mantissa, finely around the sqrt(2) fold and the powers of two.
+  double worst = 0;
+  for (int e = -1021; e <= 1023; e += 7)
+    for (int i = 0; i <= 4096; ++i) {
+      const double x = std::ldexp(1.0 + double(i) / 4096.0, e);
+      worst = std::max(worst, std::abs(log2_fast(x) - std::log2(x)));
+    }
+  for (double x : {std::sqrt(2.0), std::nextafter(std::sqrt(2.0), 2.0), std::nextafter(std::sqrt(2.0), 0.0), 1.0, 2.0, 0.5})
+    worst = std::max(worst, std::abs(log2_fast(x) - std::log2(x)));
+  EXPECT_LT(worst, 2e-9);
+  EXPECT_EQ(log2_fast(1.0), 0.0);
+  EXPECT_EQ(log2_fast(8.0), 3.0);
+  EXPECT_EQ(log2_fast(0.0), -std::numeric_limits<double>::infinity());
+  EXPECT_EQ(log2_fast(std::numeric_limits<double>::infinity()), std::numeric_limits<double>::infinity());
+  EXPECT_TRUE(std::isnan(log2_fast(std::nan(""))));
+  EXPECT_TRUE(std::isnan(log2_fast(-1.0)));
+  EXPECT_NEAR(log2_fast(std::numeric_limits<double>::denorm_min()), -1074.0, 1e-12);
+}
+
 TEST(Vec3, NormalizeKeepsZeroVectorFinite) {
   EXPECT_EQ(normalize(Vec3f{}), Vec3f{});
   const Vec3f n = normalize(Vec3f{0, 3, 4});
