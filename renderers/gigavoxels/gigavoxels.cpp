@@ -514,6 +514,8 @@ class GigaVoxelsRenderer final : public Renderer {
     double prev_t = 0;
     float prev_value = 0;
     bool have_prev = false;
+    bool have_prev_gradient = false;  // DVR: the previous sample's gradient, for the segment's shading
+    Vec3d prev_gradient{0.0};
   };
 
   /// A node as the ray sees it, in the node's own coordinates ([0, 1]^3 across the node): the
@@ -900,7 +902,7 @@ class GigaVoxelsRenderer final : public Renderer {
           }
           if (leap && !s.have_prev) {  // DVR: the group adds nothing; its last value starts the next segment
             ++counters.samples;
-            s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before, s.have_prev = true;
+            s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before, s.have_prev = true, s.have_prev_gradient = false;
             t = t_next;
             continue;
           }
@@ -921,16 +923,18 @@ class GigaVoxelsRenderer final : public Renderer {
               Vec3f col;
               float a;
               r.preintegrated_.segment(s.prev_value, v, seg * unit_per_t / r.finest_voxel_unit_, col, a);
-              if (a > 0) composite(s, px, col, a, t, g, ray);
+              // Shaded with the mean of its ends' gradients (the end's alone is half a segment off).
+              if (a > 0) composite(s, px, col, a, t, s.have_prev_gradient ? (g + s.prev_gradient) * 0.5 : g, ray);
               if (s.alpha >= stop) {
                 finished = true;
                 break;
               }
             }
             s.prev_value = v, s.prev_t = t, s.have_prev = true;
+            s.prev_gradient = g, s.have_prev_gradient = gradients;
             if (leap) {  // this sample closed the segment into the group; its last value starts the next
               ++counters.samples;
-              s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before;
+              s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before, s.have_prev_gradient = false;
               t = t_next;
               continue;
             }
