@@ -859,6 +859,10 @@ class GigaVoxelsRenderer final : public Renderer {
         const double fine_voxel = 1.0 / (double(r.m_) * fine.scale);
         bool finished = false;
         double visible_until = -kInf;  // the cell group of the last look showed something
+        // Where the footprint stays finer than the finest level met up to the node's exit (it
+        // only grows along the ray), every step has that level alone and the same length.
+        const bool finest_only = footprint(t_end) <= fine_voxel;
+        const double finest_dt = r.step_ * fine_voxel / unit_per_t;
         // Iso: one more sample at the node's exit, so that a crossing in the last part-step is
         // bracketed even when the next node is empty.
         for (bool last = false; !last;) {
@@ -867,12 +871,15 @@ class GigaVoxelsRenderer final : public Renderer {
             t = t_face;
             last = true;
           }
-          const double fp = footprint(t);
-          // Finer than the finest level met: that level alone, without a log per sample.
-          const double lam = fp <= fine_voxel ? double(fine.depth) : depth_for(fp);
-          const double dt_unit = r.step_ * std::max(fp, fine_voxel);
-          const double dt = dt_unit / unit_per_t;
-          const Blend bl = blend(lv, lam);
+          double lam = fine.depth, dt = finest_dt;
+          Blend bl{nullptr, &fine, 1};
+          if (!finest_only) {
+            const double fp = footprint(t);
+            // Finer than the finest level met: that level alone, without a log per sample.
+            if (fp > fine_voxel) lam = depth_for(fp);
+            dt = r.step_ * std::max(fp, fine_voxel) / unit_per_t;
+            bl = blend(lv, lam);
+          }
           // A clear cell group (nothing visible in it), and the clear groups around it, are
           // leapt to the first sample position past them: the samples taken are the ones
           // marching every step would take.
