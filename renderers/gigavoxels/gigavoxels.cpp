@@ -387,7 +387,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
   /// Sets the group distances of a freshly written brick: a group shows something when the
   /// range of its voxels (the corners of its cells, up to the brick's last voxel) does.
-  void mark_visible_groups(uint32_t slot) {
+  void set_group_distances(uint32_t slot) {
     const Voxel* v = brick(slot);
     uint8_t* distance = group_distances_.data() + size_t(slot) * group_count_;
     const int e = m_ + 2;
@@ -456,7 +456,7 @@ class GigaVoxelsRenderer final : public Renderer {
     if (slot == gigavoxels::kNoAddress) return false;
     std::transform(scratch_.begin(), scratch_.end(), pool_.begin() + std::ptrdiff_t(size_t(slot) * tree_.brick_values()),
                    [](float v) { return Voxel(v); });  // exact: the values came from Voxel (or are float)
-    mark_visible_groups(slot);
+    set_group_distances(slot);
     if (const uint64_t id = source_->shared_id(a)) {
       tree_.keep_brick(slot);
       shared_[id] = slot;
@@ -831,7 +831,8 @@ class GigaVoxelsRenderer final : public Renderer {
             // face when the value steps across an isovalue there.
             for (size_t k = 0; k < r.scene_.isosurfaces.size(); ++k)
               if (v == r.scene_.isosurfaces[k].value) hit_t = std::min(hit_t, t), hit_surface = int(k);
-            if (hit_t == kInf && s.have_prev && crossing(s.prev_value, v)) hit_t = t, hit_surface = first_crossed(s.prev_value, v);
+            const int crossed = hit_t == kInf && s.have_prev ? first_crossed(s.prev_value, v) : -1;
+            if (crossed >= 0) hit_t = t, hit_surface = crossed;
             if (hit_t < kInf) {
               hit_levels.count = 0;  // a face: its normal is the axis the ray entered through
               face_axis = entry_axis;
@@ -961,21 +962,16 @@ class GigaVoxelsRenderer final : public Renderer {
       }
     }
 
+    /// The first isosurface whose value going from value a to value b crosses (or lands on);
+    /// -1 when none does.
     int first_crossed(float a, float b) const {
-      for (size_t k = 0; k < r.scene_.isosurfaces.size(); ++k) {
-        const double ga = a - r.scene_.isosurfaces[k].value, gb = b - r.scene_.isosurfaces[k].value;
-        if ((ga < 0) != (gb < 0) || gb == 0) return int(k);
-      }
-      return 0;
-    }
-
-    /// Whether going from value a to value b crosses (or lands on) an isovalue.
-    bool crossing(float a, float b) const {
       const double da = a, db = b;
-      for (const auto& surface : r.scene_.isosurfaces)
-        if ((da < surface.value) != (db < surface.value) || db == surface.value) return true;
-      return false;
+      const auto& surfaces = r.scene_.isosurfaces;
+      for (size_t k = 0; k < surfaces.size(); ++k)
+        if ((da < surfaces[k].value) != (db < surfaces[k].value) || db == surfaces[k].value) return int(k);
+      return -1;
     }
+    bool crossing(float a, float b) const { return first_crossed(a, b) >= 0; }
 
     double refine_hit(const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
       // The first surface crossed between the two samples.

@@ -324,6 +324,7 @@ class GobbettiRenderer final : public Renderer {
     BrickCache& cache = ctx_.cache();
     const Camera& cam = setup.camera;
     const int w = setup.width, h = setup.height;
+    const ImageRays rays(cam, w, h);
     const int tiles_x = (w + 15) / 16;
     const int group = int(frame_ % uint64_t(std::max(1, p_.visibility_groups)));
     queries_ = 0;
@@ -349,7 +350,7 @@ class GobbettiRenderer final : public Renderer {
         in_front = 0;
         for (int y = r[1]; y < r[3] && in_front < needed; ++y)
           for (int x = r[0]; x < r[2] && in_front < needed; ++x) {
-            const Rayd ray = cam.ray(x + 0.5, y + 0.5, w, h);
+            const Rayd ray = rays.ray(x + 0.5, y + 0.5);
             const Interval<double> span = intersect(ray, box);
             if (!span.empty() && std::max(span.t0, 0.0) < double(occlusion_(x, y))) ++in_front;
           }
