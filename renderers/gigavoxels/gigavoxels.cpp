@@ -571,7 +571,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
     Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
         : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
-          path(size_t(r.source_->max_depth()) + 1) {}
+          path(size_t(r.source_->max_depth()) + 1), scaled_eye(size_t(r.source_->max_depth()) + 1) {}
 
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t.
     float sample_brick(const PathNode& b, double t, Vec3d* gradient) const {
@@ -690,19 +690,41 @@ class GigaVoxelsRenderer final : public Renderer {
     /// exactly before one rounding: e times the double-double N^depth by an error-free product
     /// (fma), and the integer part subtracted in integers where doubles no longer hold c.
     NodeFrame node_frame(int depth, const int64_t c[3]) const {
-      const Scale& s = r.scales_[size_t(depth)];
+      const ScaledEye& e = scaled_eye[size_t(depth)];
       NodeFrame f;
       for (int a = 0; a < 3; ++a) {
-        const double hi = eye[a] * s.hi;
-        const double lo = std::fma(eye[a], s.hi, -hi) + eye[a] * s.lo;
+        const double hi = e.hi[a];
         double whole;
         if (std::abs(hi) < 0x1p53) whole = hi - double(c[a]);  // exact: both are multiples of ulp(hi)
         else if (std::abs(hi) < 0x1p62) whole = double(int64_t(hi) - c[a]);  // hi is an integer here
         else whole = hi - double(c[a]);  // an eye this far outside never descends this deep
-        f.eye[a] = whole + lo;
+        f.eye[a] = whole + e.lo[a];
       }
       aim(f, depth);
       return f;
+    }
+    /// clamp(floor(u), 0, n - 1) (NaN: 0), without floor: below n - 1 and above 0, truncation is it.
+    static int64_t child_index(double u, int n) {
+      if (u >= double(n - 1)) return n - 1;
+      return u > 0 ? int64_t(u) : 0;
+    }
+    /// The eye times N^depth, hi + lo exactly (an error-free product by the double-double
+    /// N^depth), for every depth. Every primary ray leaves the same eye, so a tile computes it
+    /// once; node frames then only subtract their node's coordinates.
+    struct ScaledEye {
+      double hi[3] = {}, lo[3] = {};
+    };
+    void scale_eye() {
+      if (scaled_eye_valid && eye[0] == scaled_eye_of[0] && eye[1] == scaled_eye_of[1] && eye[2] == scaled_eye_of[2]) return;
+      for (size_t d = 0; d < scaled_eye.size(); ++d) {
+        const Scale& s = r.scales_[d];
+        for (int a = 0; a < 3; ++a) {
+          const double hi = eye[a] * s.hi;
+          scaled_eye[d].hi[a] = hi, scaled_eye[d].lo[a] = std::fma(eye[a], s.hi, -hi) + eye[a] * s.lo;
+        }
+      }
+      std::copy_n(eye, 3, scaled_eye_of);
+      scaled_eye_valid = true;
     }
     /// The ray's direction in the frame of a node at a depth.
     void aim(NodeFrame& f, int depth) const {
@@ -724,6 +746,7 @@ class GigaVoxelsRenderer final : public Renderer {
         eye[a] = (ray.org[a] + r.unit_offset_) / r.extent_, dir[a] = ray.dir[a] / r.extent_;
         inv_dir[a] = 1.0 / dir[a];
       }
+      scale_eye();
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
       const double stop = r.scene_.quality.termination_opacity;
       const int n = r.n_;
@@ -782,7 +805,7 @@ class GigaVoxelsRenderer final : public Renderer {
           PathNode& child = path[depth + 1];
           int index = 0, stride = 1;
           for (int a = 0; a < 3; ++a, stride *= n) {
-            const int64_t ci = std::clamp<int64_t>(int64_t(std::floor((p->frame.eye[a] + p->frame.dir[a] * t) * n)), 0, n - 1);
+            const int64_t ci = child_index((p->frame.eye[a] + p->frame.dir[a] * t) * n, n);
             child.c[a] = p->c[a] * n + ci;
             index += int(ci) * stride;
           }
@@ -1037,6 +1060,9 @@ class GigaVoxelsRenderer final : public Renderer {
     /// The last descent (of this ray, or of the tile's previous ray), root first.
     std::vector<PathNode> path;
     int path_size = 0;
+    std::vector<ScaledEye> scaled_eye;  // per depth, for the eye scaled_eye_of
+    double scaled_eye_of[3] = {};
+    bool scaled_eye_valid = false;
     int hit_surface = -1;
     int face_axis = -1;
     Levels hit_levels;
