@@ -214,6 +214,35 @@ TEST(Cubic, CubicMaxAtEndsAndCriticalPoints) {
   EXPECT_DOUBLE_EQ(cubic_max(g, 0.0, where), g(0.0));
 }
 
+TEST(Cubic, BisectCrossingEndsWithTheSecantOfItsLastBracket) {
+  // A straight line: the secant is its root, with or without bisections.
+  for (int steps : {0, 1, 6}) {
+    const double t = bisect_crossing([](double m) { return 2 * m - 0.6; }, 0.0, 1.0, -0.6, 1.4, steps);
+    EXPECT_NEAR(t, 0.3, 1e-15) << steps;
+  }
+  // A value exactly on the isovalue at the far end is the crossing.
+  EXPECT_EQ(bisect_crossing([](double) { return 1.0; }, 0.0, 1.0, -1.0, 0.0, 6), 1.0);
+  // Curved functions: after 6 bisections the secant of the last bracket (1/64 wide) lands at
+  // least 16 times closer than the bracket's midpoint could promise (1/128).
+  struct Case {
+    double (*g)(double);
+    double root;
+  };
+  const Case cases[] = {
+      {[](double m) { return m * m * m - 0.02; }, std::cbrt(0.02)},
+      {[](double m) { return std::exp(3 * m) - 2.0; }, std::log(2.0) / 3},
+  };
+  for (const Case& c : cases) {
+    int evaluations = 0;
+    const double t = bisect_crossing([&](double m) { return ++evaluations, c.g(m); }, 0.0, 1.0, c.g(0.0), c.g(1.0), 6);
+    EXPECT_EQ(evaluations, 6);
+    EXPECT_NEAR(t, c.root, 1.0 / 128 / 16);
+  }
+  // Decreasing through the isovalue, and a crossing exactly at a bisection midpoint.
+  EXPECT_NEAR(bisect_crossing([](double m) { return 0.4 - m; }, 0.0, 1.0, 0.4, -0.6, 6), 0.4, 1e-15);
+  EXPECT_EQ(bisect_crossing([](double m) { return m - 0.5; }, 0.0, 1.0, -0.5, 0.5, 6), 0.5);
+}
+
 TEST(Cubic, TrilinearCubicMatchesDirectInterpolation) {
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> unit(0.0, 1.0), value(-1.0, 1.0);

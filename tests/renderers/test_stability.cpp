@@ -265,9 +265,10 @@ void expect_iso_matches(const Rendered& r, const std::string& backend, const Sep
         // Any hit lies on the surface, up to the bisection's and float's errors.
         EXPECT_LE(std::fabs(f.at(ray.at(depth)) - iso), f.max_slope() * march_tol + 1e-6 * value_scale)
             << what << ": pixel " << x << " " << y << " depth " << depth << " exact " << t;
-        // Six bisection steps leave the crossing within step / 2^7 of the midpoint returned.
+        // Six bisection steps leave a bracket step / 2^6 wide around a crossing, and the hit
+        // returned lies in it.
         if (std::isfinite(t)) {
-          EXPECT_GE(depth, t - step / 128 - 1e-6) << what << ": pixel " << x << " " << y;
+          EXPECT_GE(depth, t - step / 64 - 1e-6) << what << ": pixel " << x << " " << y;
         }
         if (must_hit) {
           EXPECT_LE(depth, t + march_tol) << what << ": pixel " << x << " " << y;
