@@ -74,6 +74,7 @@ struct GigaVoxelsParams {
   int max_passes = 256;        // exact mode
   int refine = 6;
   bool skip_cells = true;      // leap the cells of a brick that hold nothing visible
+  int hidden_crossings = 4;    // iso: halvings of a step searched for a crossing pair it may hide (0: none)
 };
 
 using gigavoxels::kCellGroup;
@@ -263,6 +264,7 @@ class GigaVoxelsRenderer final : public Renderer {
     groups_ = groups_per_axis(m_);
     group_count_ = group_count(m_);
     group_distances_.assign(size_t(tree_.brick_capacity()) * group_count_, 0);
+    brick_slopes_.assign(size_t(tree_.brick_capacity()) * 3, 0.0f);
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -369,12 +371,13 @@ class GigaVoxelsRenderer final : public Renderer {
   const NodeTree& tree() const { return tree_; }
   const Voxel* brick(uint32_t slot) const { return pool_.data() + size_t(slot) * tree_.brick_values(); }
   const uint8_t* group_distances(uint32_t slot) const { return group_distances_.data() + size_t(slot) * group_count_; }
+  const float* brick_slopes(uint32_t slot) const { return brick_slopes_.data() + size_t(slot) * 3; }
 
  private:
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
     const uint64_t e = uint64_t(s.brick_size() + 2);
-    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_count(s.brick_size());
+    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_count(s.brick_size()) + 3 * sizeof(float);
     return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / slot_bytes, 8, 1u << 20));
   }
   /// Cell groups per axis: the cells start at sample coordinates 0 .. M (M + 1 of them, the
@@ -385,9 +388,11 @@ class GigaVoxelsRenderer final : public Renderer {
     return g * g * g;
   }
 
-  /// Sets the group distances of a freshly written brick: a group shows something when the
-  /// range of its voxels (the corners of its cells, up to the brick's last voxel) does.
-  void set_group_distances(uint32_t slot) {
+  /// What rays may assume about a freshly written brick: its group distances (a group shows
+  /// something when the range of its voxels, the corners of its cells up to the brick's last
+  /// voxel, does) and its slopes, the largest difference between neighbouring voxels along each
+  /// axis (a bound on the trilinear field's partial derivatives, per voxel of its level).
+  void set_brick_bounds(uint32_t slot) {
     const Voxel* v = brick(slot);
     uint8_t* distance = group_distances_.data() + size_t(slot) * group_count_;
     const int e = m_ + 2;
@@ -405,6 +410,18 @@ class GigaVoxelsRenderer final : public Renderer {
           distance[i] = !(lo <= hi) || scene_.value_range_visible(lo, hi) ? 0 : 1;
         }
     gigavoxels::chessboard_distances(groups_, distance);
+    float* slope = brick_slopes_.data() + size_t(slot) * 3;
+    slope[0] = slope[1] = slope[2] = 0;
+    for (int z = 0; z < e; ++z)
+      for (int y = 0; y < e; ++y) {
+        const Voxel* row = v + (size_t(z) * size_t(e) + size_t(y)) * size_t(e);
+        for (int x = 0; x < e; ++x) {
+          const float c = float(row[x]);
+          if (x + 1 < e) slope[0] = std::max(slope[0], std::abs(float(row[x + 1]) - c));
+          if (y + 1 < e) slope[1] = std::max(slope[1], std::abs(float(row[x + e]) - c));
+          if (z + 1 < e) slope[2] = std::max(slope[2], std::abs(float(row[x + size_t(e) * e]) - c));
+        }
+      }
   }
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
@@ -456,7 +473,7 @@ class GigaVoxelsRenderer final : public Renderer {
     if (slot == gigavoxels::kNoAddress) return false;
     std::transform(scratch_.begin(), scratch_.end(), pool_.begin() + std::ptrdiff_t(size_t(slot) * tree_.brick_values()),
                    [](float v) { return Voxel(v); });  // exact: the values came from Voxel (or are float)
-    set_group_distances(slot);
+    set_brick_bounds(slot);
     if (const uint64_t id = source_->shared_id(a)) {
       tree_.keep_brick(slot);
       shared_[id] = slot;
@@ -552,6 +569,7 @@ class GigaVoxelsRenderer final : public Renderer {
     NodeFrame frame;
     const Voxel* brick = nullptr;              // null: no brick
     const uint8_t* group_distances = nullptr;  // per cell group (cell_groups.h)
+    const float* slopes = nullptr;  // per axis (set_brick_bounds)
     Levels levels;  // the last 3 bricks down to and including this node's
     bool contains(double t) const {
       for (int a = 0; a < 3; ++a) {
@@ -754,6 +772,7 @@ class GigaVoxelsRenderer final : public Renderer {
       double hit_t = kInf;
       Vec3d hit_gradient(0.0);
       bool requested = false;
+      uint32_t prev_node = gigavoxels::kNoAddress;  // whose brick s.prev_value was sampled from (iso)
       int exit_axis = -1;
       aim_path_along_ray();
       while (t < ray.span.t1) {
@@ -793,6 +812,7 @@ class GigaVoxelsRenderer final : public Renderer {
           p->brick = nullptr;
           if (p->node.has_brick()) {
             p->brick = r.brick(p->node.brick()), p->group_distances = r.group_distances(p->node.brick());
+            p->slopes = r.brick_slopes(p->node.brick());
             lv.push(*p);
           }
           p->levels = lv;
@@ -862,6 +882,7 @@ class GigaVoxelsRenderer final : public Renderer {
               break;
             }
             s.prev_value = v, s.prev_t = t_face, s.have_prev = true;
+            prev_node = gigavoxels::kNoAddress;
           } else {
             Vec3f col;
             float a;
@@ -927,7 +948,16 @@ class GigaVoxelsRenderer final : public Renderer {
               finished = true;
               break;
             }
+            // The step into the clear groups starts in visible ones, where it may graze a surface.
+            Bracket hidden;
+            if (s.have_prev && prev_node == bl.finer->address && !bl.coarse && r.p_.hidden_crossings > 0 &&
+                hidden_crossing(*bl.finer, prev_node, s.prev_t, t, s.prev_value, std::nullopt, hidden)) {
+              hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
+              finished = true;
+              break;
+            }
             s.prev_value = voxel, s.prev_t = t_before, s.have_prev = true;
+            prev_node = gigavoxels::kNoAddress;
             t = t_next;
             continue;
           }
@@ -945,7 +975,15 @@ class GigaVoxelsRenderer final : public Renderer {
               finished = true;
               break;
             }
+            Bracket hidden;
+            if (s.have_prev && !bl.coarse && r.p_.hidden_crossings > 0 &&
+                hidden_crossing(*bl.finer, prev_node, s.prev_t, t, s.prev_value, v, hidden)) {
+              hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
+              finished = true;
+              break;
+            }
             s.prev_value = v, s.prev_t = t, s.have_prev = true;
+            prev_node = bl.coarse ? gigavoxels::kNoAddress : bl.finer->address;
           } else {
             Vec3d g(0.0);
             const float v = sample(bl, t, gradients ? &g : nullptr);
@@ -995,6 +1033,60 @@ class GigaVoxelsRenderer final : public Renderer {
       return -1;
     }
     bool crossing(float a, float b) const { return first_crossed(a, b) >= 0; }
+
+    /// Two samples on the same side of every isovalue can hide an even number of crossings
+    /// between them (a ray grazing a surface, a sheet thinner than the step). The brick's
+    /// largest voxel differences bound how fast its trilinear field changes along the ray:
+    /// where the two values are too far from an isovalue for the field to reach it and come
+    /// back within the step, there is none; elsewhere the step is halved, up to
+    /// hidden_crossings times, until each part is cleared or shows a crossing.
+    struct Bracket {
+      double t0 = 0, t1 = 0;
+      float v0 = 0, v1 = 0;
+    };
+    /// The first crossing hidden between the samples v0 at t0 and v1 at t1 of brick b's node.
+    /// v0 may be something else's (prev_node: another node's brick, a clear group's voxel), and
+    /// t0 in nodes the step went past: then only the part of the step in b's node is searched,
+    /// from this brick's own value where the ray enters it. Without v1 (t1 in a clear group,
+    /// which a voxel stood in for), this brick's value there ends the step.
+    bool hidden_crossing(const PathNode& b, uint32_t prev_node, double t0, double t1, float v0, std::optional<float> v1,
+                         Bracket& out) {
+      double slope = 0;  // the field changes at most this much per unit t along the ray
+      for (int a = 0; a < 3; ++a) slope += std::abs(b.frame.dir[a]) * double(r.m_) * double(b.slopes[a]);
+      const bool own_v0 = prev_node == b.address;
+      if (own_v0 && v1) return hidden_crossing(b, slope, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
+      if (!own_v0 && !v1) return false;
+      if (!own_v0) {
+        for (int a = 0; a < 3; ++a)
+          if (b.frame.dir[a] != 0) t0 = std::max(t0, ((b.frame.dir[a] > 0 ? 0.0 : 1.0) - b.frame.eye[a]) / b.frame.dir[a]);
+        if (!(t0 < t1)) return false;
+      }
+      // The field must still get from an isovalue to the known end and back within the step.
+      const float known = own_v0 ? v0 : *v1;
+      if (!may_hide(2 * slope * (t1 - t0), known, known)) return false;
+      ++counters.samples;
+      if (own_v0) v1 = sample_brick(b, t1, nullptr);
+      else v0 = sample_brick(b, t0, nullptr);
+      if (crossing(v0, *v1)) return out = {t0, t1, v0, *v1}, true;
+      return hidden_crossing(b, slope, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
+    }
+    /// Whether the field can reach an isovalue and come back between two values a change of
+    /// `reach` apart.
+    bool may_hide(double reach, float v0, float v1) const {
+      for (const auto& surface : r.scene_.isosurfaces)
+        if (std::abs(double(v0) - surface.value) + std::abs(double(v1) - surface.value) <= reach) return true;
+      return false;
+    }
+    bool hidden_crossing(const PathNode& b, double slope, double t0, double t1, float v0, float v1, int halvings, Bracket& out) {
+      if (halvings == 0 || !may_hide(slope * (t1 - t0), v0, v1)) return false;
+      const double tm = 0.5 * (t0 + t1);
+      ++counters.samples;
+      const float vm = sample_brick(b, tm, nullptr);
+      if (crossing(v0, vm)) return out = {t0, tm, v0, vm}, true;
+      if (hidden_crossing(b, slope, t0, tm, v0, vm, halvings - 1, out)) return true;
+      if (crossing(vm, v1)) return out = {tm, t1, vm, v1}, true;
+      return hidden_crossing(b, slope, tm, t1, vm, v1, halvings - 1, out);
+    }
 
     double refine_hit(const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
       // The first surface crossed between the two samples.
@@ -1089,6 +1181,7 @@ class GigaVoxelsRenderer final : public Renderer {
   int groups_ = 9;            // cell groups per brick axis
   size_t group_count_ = 729;  // cell groups per brick
   std::vector<uint8_t> group_distances_;  // brick_capacity() x group_count_
+  std::vector<float> brick_slopes_;  // brick_capacity() x 3 (set_brick_bounds)
   gigavoxels::PreintegratedTf preintegrated_;
 
   // Per frame: the feedback buffer and the rays' states, written by the render threads (each
@@ -1140,6 +1233,8 @@ BackendEntry gigavoxels_backend() {
       {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
       {"skip_cells", 1, 0, 1, "1: rays leap the 4^3-cell groups of a brick that hold nothing visible, as many at once as "
                               "their distance to a visible group allows; 0: every step samples"},
+      {"hidden_crossings", 4, 0, 20, "iso: halvings of a step searched for a pair of crossings its two samples may hide, "
+                                     "where the brick's slope bound allows one (0: none)"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
@@ -1163,6 +1258,7 @@ BackendEntry gigavoxels_backend() {
     gp.max_passes = int(p["max_passes"]);
     gp.refine = int(p["refine"]);
     gp.skip_cells = p["skip_cells"] != 0;
+    gp.hidden_crossings = int(p["hidden_crossings"]);
     return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       using Stored = decltype(stored);
       std::unique_ptr<Source> source;
