@@ -750,6 +750,18 @@ class GigaVoxelsRenderer final : public Renderer {
       for (int a = 0; a < 3; ++a) f.dir[a] = dir[a] * s, f.inv_dir[a] = inv_dir[a] * inv_s;
     }
 
+    /// A node the descent passes: its brick, if any, joins the levels collected.
+    void enter(PathNode& q, Levels& lv) {
+      ++counters.nodes;
+      q.brick = nullptr;
+      if (q.node.has_brick()) {
+        q.brick = r.brick(q.node.brick()), q.group_distances = r.group_distances(q.node.brick());
+        q.slopes = r.brick_slopes(q.node.brick());
+        lv.push(q);
+      }
+      q.levels = lv;
+    }
+
     /// The rays of a tile leave one eye in nearby directions, so each starts from the last
     /// ray's descent: the nodes are this ray's too as far as they contain its start, and the
     /// eye's part of their frames does not depend on the direction, so only the direction's
@@ -772,7 +784,7 @@ class GigaVoxelsRenderer final : public Renderer {
       double hit_t = kInf;
       Vec3d hit_gradient(0.0);
       bool requested = false;
-      uint32_t prev_node = gigavoxels::kNoAddress;  // whose brick s.prev_value was sampled from (iso)
+      uint32_t prev_node = gigavoxels::kNoAddress;  // iso: whose brick s.prev_value was sampled from
       int exit_axis = -1;
       aim_path_along_ray();
       while (t < ray.span.t1) {
@@ -795,27 +807,24 @@ class GigaVoxelsRenderer final : public Renderer {
               restart = i;
               break;
             }
-        Levels lv = restart > 0 ? path[restart - 1].levels : Levels{};  // the last 3 bricks above the restart
+        // The restart node was entered by an earlier descent (its brick and levels are set), or
+        // this is the tile's first: the root.
         PathNode* p = &path[restart];
-        if (restart == 0) {
+        Levels lv;
+        if (path_size == 0) {
           p->address = 0;
           p->node = r.tree_.node(0);
           p->c[0] = p->c[1] = p->c[2] = 0;
           p->depth = 0;
           p->scale = 1;
           p->frame = node_frame(0, p->c);
+          enter(*p, lv);
+        } else {
+          lv = p->levels;
         }
         int depth = restart;
         uint32_t want = 0;
         for (;;) {
-          ++counters.nodes;
-          p->brick = nullptr;
-          if (p->node.has_brick()) {
-            p->brick = r.brick(p->node.brick()), p->group_distances = r.group_distances(p->node.brick());
-            p->slopes = r.brick_slopes(p->node.brick());
-            lv.push(*p);
-          }
-          p->levels = lv;
           if (p->node.constant()) break;
           if (entry_fp * double(r.m_) * p->scale >= 1) break;  // its voxels cover at most lod_ratio pixels
           if (!p->node.has_children()) {
@@ -835,6 +844,7 @@ class GigaVoxelsRenderer final : public Renderer {
           child.depth = ++depth;
           child.frame = node_frame(depth, child.c);
           p = &child;
+          enter(*p, lv);
         }
         path_size = depth + 1;
         const uint32_t address = p->address;
@@ -950,7 +960,7 @@ class GigaVoxelsRenderer final : public Renderer {
             }
             // The step into the clear groups starts in visible ones, where it may graze a surface.
             Bracket hidden;
-            if (s.have_prev && prev_node == bl.finer->address && !bl.coarse && r.p_.hidden_crossings > 0 &&
+            if (s.have_prev && !bl.coarse && r.p_.hidden_crossings > 0 &&
                 hidden_crossing(*bl.finer, prev_node, s.prev_t, t, s.prev_value, std::nullopt, hidden)) {
               hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
               finished = true;
