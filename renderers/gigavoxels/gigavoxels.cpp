@@ -647,7 +647,7 @@ class GigaVoxelsRenderer final : public Renderer {
       int g[3];
       for (int a = 0; a < 3; ++a) {
         const double l = std::min(std::max((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5, 0.0), top);
-        g[a] = int(l) / kCellGroup;
+        g[a] = int(unsigned(l) / unsigned(kCellGroup));  // l >= 0
       }
       const int i = (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
       const int reach = std::max(int(b.group_distances[i]) - 1, 0);  // clear groups on every side
@@ -710,6 +710,11 @@ class GigaVoxelsRenderer final : public Renderer {
     NodeFrame node_frame(int depth, const int64_t c[3]) const {
       const ScaledEye& e = scaled_eye[size_t(depth)];
       NodeFrame f;
+      if (e.small) {  // the common case, without a test per axis
+        for (int a = 0; a < 3; ++a) f.eye[a] = (e.hi[a] - double(c[a])) + e.lo[a];
+        aim(f, depth);
+        return f;
+      }
       for (int a = 0; a < 3; ++a) {
         const double hi = e.hi[a];
         double whole;
@@ -731,6 +736,7 @@ class GigaVoxelsRenderer final : public Renderer {
     /// once; node frames then only subtract their node's coordinates.
     struct ScaledEye {
       double hi[3] = {}, lo[3] = {};
+      bool small = false;  // every |hi| < 2^53
     };
     void scale_eye() {
       if (scaled_eye_valid && eye[0] == scaled_eye_of[0] && eye[1] == scaled_eye_of[1] && eye[2] == scaled_eye_of[2]) return;
@@ -740,6 +746,8 @@ class GigaVoxelsRenderer final : public Renderer {
           const double hi = eye[a] * s.hi;
           scaled_eye[d].hi[a] = hi, scaled_eye[d].lo[a] = std::fma(eye[a], s.hi, -hi) + eye[a] * s.lo;
         }
+        const double* hi = scaled_eye[d].hi;
+        scaled_eye[d].small = std::abs(hi[0]) < 0x1p53 && std::abs(hi[1]) < 0x1p53 && std::abs(hi[2]) < 0x1p53;
       }
       std::copy_n(eye, 3, scaled_eye_of);
       scaled_eye_valid = true;
