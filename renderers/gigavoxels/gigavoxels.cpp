@@ -26,7 +26,6 @@
 #include <memory>
 #include <mutex>
 #include <optional>
-#include <type_traits>
 #include <unordered_map>
 
 #include <fmt/format.h>
@@ -39,6 +38,7 @@
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/cell_groups.h"
 #include "renderers/gigavoxels/feedback.h"
+#include "renderers/gigavoxels/field_bounds.h"
 #include "renderers/gigavoxels/node_tree.h"
 #include "renderers/gigavoxels/preintegrated.h"
 #include "renderers/gigavoxels/procedural.h"
@@ -50,6 +50,8 @@ using gigavoxels::Node;
 using gigavoxels::NodeAddress;
 using gigavoxels::NodeContent;
 using gigavoxels::NodeTree;
+using gigavoxels::BrickDifferences;
+using gigavoxels::FieldBounds;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 // Feedback entries: a node address and what the ray wants of it.
@@ -248,38 +250,6 @@ class ProducerSource final : public Source {
   uint64_t produced_ = 0;
 };
 
-/// The largest difference between neighbouring voxels along each axis of an e^3 brick. Row by
-/// row into independent lanes (a max reduction in floats does not vectorise; in integers, for
-/// 8- and 16-bit voxels, it does): 5 to 8 times faster than a test per neighbour, which
-/// mattered for the loader of produced bricks.
-template <typename Voxel>
-void neighbour_slopes(const Voxel* v, size_t e, float out[3]) {
-  constexpr bool small_integers = std::is_integral_v<Voxel> && sizeof(Voxel) <= 2;
-  using Acc = std::conditional_t<small_integers, int, float>;
-  Acc lanes[3][4] = {};
-  for (size_t z = 0; z < e; ++z)
-    for (size_t y = 0; y < e; ++y) {
-      const Voxel* row = v + (z * e + y) * e;
-      const Voxel* next[3] = {row + 1, y + 1 < e ? row + e : nullptr, z + 1 < e ? row + e * e : nullptr};
-      for (int a = 0; a < 3; ++a) {
-        if (!next[a]) continue;
-        const size_t n = a == 0 ? e - 1 : e;
-        Acc* m = lanes[a];
-        size_t x = 0;
-        for (; x + 4 <= n; x += 4)
-          for (size_t l = 0; l < 4; ++l) {
-            const Acc d = Acc(next[a][x + l]) - Acc(row[x + l]);
-            m[l] = std::max(m[l], d < 0 ? -d : d);
-          }
-        for (; x < n; ++x) {
-          const Acc d = Acc(next[a][x]) - Acc(row[x]);
-          m[0] = std::max(m[0], d < 0 ? -d : d);
-        }
-      }
-    }
-  for (int a = 0; a < 3; ++a) out[a] = float(std::max(std::max(lanes[a][0], lanes[a][1]), std::max(lanes[a][2], lanes[a][3])));
-}
-
 /// Voxel: the brick pool's type, the store's own for a store (a copy of its bricks, 1 byte
 /// per voxel for 8-bit data: the samples are memory-bound) and float for produced bricks.
 template <typename Voxel>
@@ -297,7 +267,7 @@ class GigaVoxelsRenderer final : public Renderer {
     groups_ = groups_per_axis(m_);
     group_count_ = group_count(m_);
     group_distances_.assign(size_t(tree_.brick_capacity()) * group_count_, 0);
-    brick_slopes_.assign(size_t(tree_.brick_capacity()) * 3, 0.0f);
+    brick_differences_.assign(size_t(tree_.brick_capacity()), BrickDifferences{});
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -404,13 +374,13 @@ class GigaVoxelsRenderer final : public Renderer {
   const NodeTree& tree() const { return tree_; }
   const Voxel* brick(uint32_t slot) const { return pool_.data() + size_t(slot) * tree_.brick_values(); }
   const uint8_t* group_distances(uint32_t slot) const { return group_distances_.data() + size_t(slot) * group_count_; }
-  const float* brick_slopes(uint32_t slot) const { return brick_slopes_.data() + size_t(slot) * 3; }
+  const BrickDifferences& brick_differences_of(uint32_t slot) const { return brick_differences_[slot]; }
 
  private:
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
     const uint64_t e = uint64_t(s.brick_size() + 2);
-    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_count(s.brick_size()) + 3 * sizeof(float);
+    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_count(s.brick_size()) + sizeof(BrickDifferences);
     return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / slot_bytes, 8, 1u << 20));
   }
   /// Cell groups per axis: the cells start at sample coordinates 0 .. M (M + 1 of them, the
@@ -423,8 +393,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
   /// What rays may assume about a freshly written brick: its group distances (a group shows
   /// something when the range of its voxels, the corners of its cells up to the brick's last
-  /// voxel, does) and its slopes, the largest difference between neighbouring voxels along each
-  /// axis (a bound on the trilinear field's partial derivatives, per voxel of its level).
+  /// voxel, does) and its differences (BrickDifferences), which bound its field along a ray.
   void set_brick_bounds(uint32_t slot) {
     const Voxel* v = brick(slot);
     uint8_t* distance = group_distances_.data() + size_t(slot) * group_count_;
@@ -443,7 +412,7 @@ class GigaVoxelsRenderer final : public Renderer {
           distance[i] = !(lo <= hi) || scene_.value_range_visible(lo, hi) ? 0 : 1;
         }
     gigavoxels::chessboard_distances(groups_, distance);
-    neighbour_slopes(v, size_t(e), brick_slopes_.data() + size_t(slot) * 3);
+    brick_differences_[slot] = gigavoxels::brick_differences(v, size_t(e));
   }
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
@@ -591,7 +560,7 @@ class GigaVoxelsRenderer final : public Renderer {
     NodeFrame frame;
     const Voxel* brick = nullptr;              // null: no brick
     const uint8_t* group_distances = nullptr;  // per cell group (cell_groups.h)
-    const float* slopes = nullptr;  // per axis (set_brick_bounds)
+    const BrickDifferences* differences = nullptr;  // set_brick_bounds
     Levels levels;  // the last 3 bricks down to and including this node's
     bool contains(double t) const {
       for (int a = 0; a < 3; ++a) {
@@ -786,7 +755,7 @@ class GigaVoxelsRenderer final : public Renderer {
       q.brick = nullptr;
       if (q.node.has_brick()) {
         q.brick = r.brick(q.node.brick()), q.group_distances = r.group_distances(q.node.brick());
-        q.slopes = r.brick_slopes(q.node.brick());
+        q.differences = &r.brick_differences_of(q.node.brick());
         lv.push(q);
       }
       q.levels = lv;
@@ -815,6 +784,7 @@ class GigaVoxelsRenderer final : public Renderer {
       Vec3d hit_gradient(0.0);
       bool requested = false;
       uint32_t prev_node = gigavoxels::kNoAddress;  // iso: whose brick s.prev_value was sampled from
+      CachedBounds bounds;
       int exit_axis = -1;
       aim_path_along_ray();
       while (t < ray.span.t1) {
@@ -991,7 +961,7 @@ class GigaVoxelsRenderer final : public Renderer {
             // The step into the clear groups starts in visible ones, where it may graze a surface.
             Bracket hidden;
             if (s.have_prev && !bl.coarse && r.p_.hidden_crossings > 0 &&
-                hidden_crossing(*bl.finer, prev_node, s.prev_t, t, s.prev_value, std::nullopt, hidden)) {
+                hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, s.prev_t, t, s.prev_value, std::nullopt, hidden)) {
               hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
               finished = true;
               break;
@@ -1017,7 +987,7 @@ class GigaVoxelsRenderer final : public Renderer {
             }
             Bracket hidden;
             if (s.have_prev && !bl.coarse && r.p_.hidden_crossings > 0 &&
-                hidden_crossing(*bl.finer, prev_node, s.prev_t, t, s.prev_value, v, hidden)) {
+                hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, s.prev_t, t, s.prev_value, v, hidden)) {
               hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
               finished = true;
               break;
@@ -1075,57 +1045,76 @@ class GigaVoxelsRenderer final : public Renderer {
     bool crossing(float a, float b) const { return first_crossed(a, b) >= 0; }
 
     /// Two samples on the same side of every isovalue can hide an even number of crossings
-    /// between them (a ray grazing a surface, a sheet thinner than the step). The brick's
-    /// largest voxel differences bound how fast its trilinear field changes along the ray:
-    /// where the two values are too far from an isovalue for the field to reach it and come
-    /// back within the step, there is none; elsewhere the step is halved, up to
+    /// between them (a ray grazing a surface, a sheet thinner than the step). A crossing pair
+    /// needs both: the ends near enough to an isovalue for the field to reach it and come back
+    /// (FieldBounds::slope), and the chord between them near enough for the field to stray to
+    /// it (FieldBounds::stray). Where both allow one, the step is halved, up to
     /// hidden_crossings times, until each part is cleared or shows a crossing.
     struct Bracket {
       double t0 = 0, t1 = 0;
       float v0 = 0, v1 = 0;
     };
+    FieldBounds field_bounds(const PathNode& b) const {
+      double w[3];  // voxels of b's level per unit t, per axis
+      for (int a = 0; a < 3; ++a) w[a] = b.frame.dir[a] * double(r.m_);
+      return gigavoxels::field_bounds(*b.differences, w);
+    }
     /// The first crossing hidden between the samples v0 at t0 and v1 at t1 of brick b's node.
     /// v0 may be something else's (prev_node: another node's brick, a clear group's voxel), and
     /// t0 in nodes the step went past: then only the part of the step in b's node is searched,
     /// from this brick's own value where the ray enters it. Without v1 (t1 in a clear group,
     /// which a voxel stood in for), this brick's value there ends the step.
-    bool hidden_crossing(const PathNode& b, uint32_t prev_node, double t0, double t1, float v0, std::optional<float> v1,
-                         Bracket& out) {
-      double slope = 0;  // the field changes at most this much per unit t along the ray
-      for (int a = 0; a < 3; ++a) slope += std::abs(b.frame.dir[a]) * double(r.m_) * double(b.slopes[a]);
+    /// The bounds of the brick last searched: a node's level fixes its direction's scale, so
+    /// they hold until the brick changes (per ray: the direction does).
+    struct CachedBounds {
+      const PathNode* node = nullptr;
+      const BrickDifferences* differences = nullptr;
+      FieldBounds bounds;
+      const FieldBounds& of(const PathNode& b, const Tracer& tracer) {
+        if (&b != node || b.differences != differences) node = &b, differences = b.differences, bounds = tracer.field_bounds(b);
+        return bounds;
+      }
+    };
+    bool hidden_crossing(const PathNode& b, const FieldBounds& f, uint32_t prev_node, double t0, double t1, float v0,
+                         std::optional<float> v1, Bracket& out) {
       const bool own_v0 = prev_node == b.address;
-      if (own_v0 && v1) return hidden_crossing(b, slope, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
+      if (own_v0 && v1) return search_halves(b, f, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
       if (!own_v0 && !v1) return false;
       if (!own_v0) {
         for (int a = 0; a < 3; ++a)
           if (b.frame.dir[a] != 0) t0 = std::max(t0, ((b.frame.dir[a] > 0 ? 0.0 : 1.0) - b.frame.eye[a]) / b.frame.dir[a]);
         if (!(t0 < t1)) return false;
       }
-      // The field must still get from an isovalue to the known end and back within the step.
-      const float known = own_v0 ? v0 : *v1;
-      if (!may_hide(2 * slope * (t1 - t0), known, known)) return false;
+      // With one end known, f must still get from an isovalue to it within the step.
+      const double known = own_v0 ? v0 : *v1;
+      bool reachable = false;
+      for (const auto& surface : r.scene_.isosurfaces) reachable |= std::abs(known - surface.value) <= f.slope * (t1 - t0);
+      if (!reachable) return false;
       ++counters.samples;
       if (own_v0) v1 = sample_brick(b, t1, nullptr);
       else v0 = sample_brick(b, t0, nullptr);
       if (crossing(v0, *v1)) return out = {t0, t1, v0, *v1}, true;
-      return hidden_crossing(b, slope, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
+      return search_halves(b, f, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
     }
-    /// Whether the field can reach an isovalue and come back between two values a change of
-    /// `reach` apart.
-    bool may_hide(double reach, float v0, float v1) const {
-      for (const auto& surface : r.scene_.isosurfaces)
-        if (std::abs(double(v0) - surface.value) + std::abs(double(v1) - surface.value) <= reach) return true;
+    /// Whether f can cross an isovalue twice between the values v0 and v1, dt apart, both on
+    /// the same side of every isovalue.
+    bool may_hide(const FieldBounds& f, double dt, float v0, float v1) const {
+      for (const auto& surface : r.scene_.isosurfaces) {
+        const double g0 = std::abs(double(v0) - surface.value), g1 = std::abs(double(v1) - surface.value);
+        if (g0 + g1 <= f.slope * dt && std::min(g0, g1) <= f.stray(dt)) return true;
+      }
       return false;
     }
-    bool hidden_crossing(const PathNode& b, double slope, double t0, double t1, float v0, float v1, int halvings, Bracket& out) {
-      if (halvings == 0 || !may_hide(slope * (t1 - t0), v0, v1)) return false;
+    bool search_halves(const PathNode& b, const FieldBounds& f, double t0, double t1, float v0, float v1, int halvings,
+                       Bracket& out) {
+      if (halvings == 0 || !may_hide(f, t1 - t0, v0, v1)) return false;
       const double tm = 0.5 * (t0 + t1);
       ++counters.samples;
       const float vm = sample_brick(b, tm, nullptr);
       if (crossing(v0, vm)) return out = {t0, tm, v0, vm}, true;
-      if (hidden_crossing(b, slope, t0, tm, v0, vm, halvings - 1, out)) return true;
+      if (search_halves(b, f, t0, tm, v0, vm, halvings - 1, out)) return true;
       if (crossing(vm, v1)) return out = {tm, t1, vm, v1}, true;
-      return hidden_crossing(b, slope, tm, t1, vm, v1, halvings - 1, out);
+      return search_halves(b, f, tm, t1, vm, v1, halvings - 1, out);
     }
 
     double refine_hit(const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
@@ -1221,7 +1210,7 @@ class GigaVoxelsRenderer final : public Renderer {
   int groups_ = 9;            // cell groups per brick axis
   size_t group_count_ = 729;  // cell groups per brick
   std::vector<uint8_t> group_distances_;  // brick_capacity() x group_count_
-  std::vector<float> brick_slopes_;  // brick_capacity() x 3 (set_brick_bounds)
+  std::vector<BrickDifferences> brick_differences_;  // per slot (set_brick_bounds)
   gigavoxels::PreintegratedTf preintegrated_;
 
   // Per frame: the feedback buffer and the rays' states, written by the render threads (each
