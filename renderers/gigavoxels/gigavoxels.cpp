@@ -412,7 +412,8 @@ class GigaVoxelsRenderer final : public Renderer {
           distance[i] = !(lo <= hi) || scene_.value_range_visible(lo, hi) ? 0 : 1;
         }
     gigavoxels::chessboard_distances(groups_, distance);
-    brick_differences_[slot] = gigavoxels::brick_differences(v, size_t(e));
+    if (scene_.mode == RenderMode::iso && p_.hidden_crossings > 0)  // only the search reads them
+      brick_differences_[slot] = gigavoxels::brick_differences(v, size_t(e));
   }
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     return p.node_blocks ? p.node_blocks : 2 * brick_slots(ctx, p, s) + 16;
