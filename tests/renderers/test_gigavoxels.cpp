@@ -217,8 +217,9 @@ TEST(GigaVoxelsCellGroups, DistancesAreChessboardDistancesToTheNearestVisibleGro
 
 TEST(GigaVoxelsFieldBounds, BoundTheTrilinearFieldAlongEverySegment) {
   // Random bricks (smooth, rough and 8-bit quantised) and random segments through them: the
-  // field, sampled densely, never changes faster than slope and never strays from the chord
-  // between the segment's ends by more than stray(dt), across however many cell faces.
+  // differences are the brute-force ones, and the field, sampled densely, never changes faster
+  // than slope nor strays from the chord between the segment's ends by more than stray(dt),
+  // across however many cell faces.
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   const size_t e = 7;
@@ -234,6 +235,44 @@ TEST(GigaVoxelsFieldBounds, BoundTheTrilinearFieldAlongEverySegment) {
           v[(z * e + y) * e + x] = float(val);
         }
     const gigavoxels::BrickDifferences d = gigavoxels::brick_differences(v.data(), e);
+    // Against brute force, and the 8-bit path against the float one on the quantised bricks.
+    const auto at = [&](size_t x, size_t y, size_t z) { return double(v[(z * e + y) * e + x]); };
+    double first[3] = {}, second[3] = {}, mixed[3] = {};
+    for (size_t z = 0; z < e; ++z)
+      for (size_t y = 0; y < e; ++y)
+        for (size_t x = 0; x < e; ++x) {
+          const size_t p[3] = {x, y, z};
+          for (int a = 0; a < 3; ++a) {
+            size_t q1[3] = {x, y, z}, q2[3] = {x, y, z};
+            if (p[a] + 1 < e) q1[a] += 1, first[a] = std::max(first[a], std::abs(at(q1[0], q1[1], q1[2]) - at(x, y, z)));
+            if (p[a] + 2 < e) {
+              q2[a] += 2;
+              second[a] = std::max(second[a], std::abs(at(q2[0], q2[1], q2[2]) - 2 * at(q1[0], q1[1], q1[2]) + at(x, y, z)));
+            }
+          }
+          const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+          for (int k = 0; k < 3; ++k) {
+            const int i = pairs[k][0], j = pairs[k][1];
+            if (p[i] + 1 >= e || p[j] + 1 >= e) continue;
+            size_t qi[3] = {x, y, z}, qj[3] = {x, y, z}, qij[3] = {x, y, z};
+            qi[i] += 1, qj[j] += 1, qij[i] += 1, qij[j] += 1;
+            mixed[k] = std::max(mixed[k], std::abs(at(qij[0], qij[1], qij[2]) - at(qi[0], qi[1], qi[2]) - at(qj[0], qj[1], qj[2]) + at(x, y, z)));
+          }
+        }
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_FLOAT_EQ(d.first[a], float(first[a])) << "trial " << trial;
+      ASSERT_FLOAT_EQ(d.second[a], float(second[a])) << "trial " << trial;
+      ASSERT_FLOAT_EQ(d.mixed[a], float(mixed[a])) << "trial " << trial;
+    }
+    if (kind == 2) {
+      const std::vector<uint8_t> bytes(v.begin(), v.end());
+      const gigavoxels::BrickDifferences d8 = gigavoxels::brick_differences(bytes.data(), e);
+      for (int a = 0; a < 3; ++a) {
+        ASSERT_EQ(d8.first[a], d.first[a]);
+        ASSERT_EQ(d8.second[a], d.second[a]);
+        ASSERT_EQ(d8.mixed[a], d.mixed[a]);
+      }
+    }
     // A segment from p0, w voxels per unit t, t in [0, dt], inside the brick's cells.
     double p0[3], w[3];
     const double dt = 0.25 + 2.5 * unit(rng);
