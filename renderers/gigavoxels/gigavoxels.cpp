@@ -858,7 +858,7 @@ class GigaVoxelsRenderer final : public Renderer {
         const int entry_axis = exit_axis;
         for (int a = 0; a < 3; ++a) {
           if (frame.dir[a] == 0) continue;
-          const double ta = ((frame.dir[a] > 0 ? 1.0 : 0.0) - frame.eye[a]) / frame.dir[a];
+          const double ta = ((frame.dir[a] > 0 ? 1.0 : 0.0) - frame.eye[a]) * frame.inv_dir[a];
           if (ta < t_exit) t_exit = ta, exit_axis = a;
         }
         const double t_face = std::min(std::max(t_exit, t), ray.span.t1);
