@@ -952,6 +952,15 @@ class GigaVoxelsRenderer final : public Renderer {
             t_next = t + std::max(steps, 1.0) * dt;
             t_before = t_next - dt;  // the last position in the clear groups
           }
+          // Iso: the first crossing the step from the previous sample to t hides (hit_t), if any.
+          const auto hidden_hit = [&](std::optional<float> value_at_t) {
+            Bracket hidden;
+            if (!s.have_prev || bl.coarse || r.p_.hidden_crossings == 0 ||
+                !hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, s.prev_t, t, s.prev_value, value_at_t, hidden))
+              return false;
+            hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
+            return true;
+          };
           if (leap && iso) {
             // Every value in the clear groups is on the voxel's side of every isovalue.
             if (s.have_prev && crossing(s.prev_value, voxel)) {
@@ -960,10 +969,7 @@ class GigaVoxelsRenderer final : public Renderer {
               break;
             }
             // The step into the clear groups starts in visible ones, where it may graze a surface.
-            Bracket hidden;
-            if (s.have_prev && !bl.coarse && r.p_.hidden_crossings > 0 &&
-                hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, s.prev_t, t, s.prev_value, std::nullopt, hidden)) {
-              hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
+            if (hidden_hit(std::nullopt)) {
               finished = true;
               break;
             }
@@ -986,10 +992,7 @@ class GigaVoxelsRenderer final : public Renderer {
               finished = true;
               break;
             }
-            Bracket hidden;
-            if (s.have_prev && !bl.coarse && r.p_.hidden_crossings > 0 &&
-                hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, s.prev_t, t, s.prev_value, v, hidden)) {
-              hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
+            if (hidden_hit(v)) {
               finished = true;
               break;
             }
@@ -1060,11 +1063,6 @@ class GigaVoxelsRenderer final : public Renderer {
       for (int a = 0; a < 3; ++a) w[a] = b.frame.dir[a] * double(r.m_);
       return gigavoxels::field_bounds(*b.differences, w);
     }
-    /// The first crossing hidden between the samples v0 at t0 and v1 at t1 of brick b's node.
-    /// v0 may be something else's (prev_node: another node's brick, a clear group's voxel), and
-    /// t0 in nodes the step went past: then only the part of the step in b's node is searched,
-    /// from this brick's own value where the ray enters it. Without v1 (t1 in a clear group,
-    /// which a voxel stood in for), this brick's value there ends the step.
     /// The bounds of the brick last searched: a node's level fixes its direction's scale, so
     /// they hold until the brick changes (per ray: the direction does).
     struct CachedBounds {
@@ -1076,6 +1074,11 @@ class GigaVoxelsRenderer final : public Renderer {
         return bounds;
       }
     };
+    /// The first crossing hidden between the samples v0 at t0 and v1 at t1 of brick b's node.
+    /// v0 may be something else's (prev_node: another node's brick, a clear group's voxel), and
+    /// t0 in nodes the step went past: then only the part of the step in b's node is searched,
+    /// from this brick's own value where the ray enters it. Without v1 (t1 in a clear group,
+    /// which a voxel stood in for), this brick's value there ends the step.
     bool hidden_crossing(const PathNode& b, const FieldBounds& f, uint32_t prev_node, double t0, double t1, float v0,
                          std::optional<float> v1, Bracket& out) {
       const bool own_v0 = prev_node == b.address;
