@@ -16,7 +16,8 @@ class ShadingModel {
   ShadingModel(const Shading& s, const VolumeGeometry& g)
       : s_(s),
         light_position_(g.from_normalised(s.light_position)),
-        light_direction_(normalize(s.light_direction)) {}
+        light_direction_(normalize(s.light_direction)),
+        shininess_power_(s.shininess == std::rint(s.shininess) && s.shininess >= 1 && s.shininess <= 4096 ? unsigned(s.shininess) : 0) {}
 
   bool lit() const { return s_.lit(); }
   /// @brief Unit vector from p towards the light, and the distance to it (infinite for
@@ -60,7 +61,7 @@ class ShadingModel {
       diffuse = float(nl);
       const Vec3d h = normalize(light + view);
       const double nh = std::fabs(dot(n, h));
-      specular = nh > 0 ? float(std::pow(nh, double(s_.shininess))) : 0.0f;
+      if (nh > 0) specular = float(shininess_power_ ? pow_uint(nh, shininess_power_) : std::pow(nh, double(s_.shininess)));
     }
     const Vec3f lc = s_.light_color;
     Vec3f out = base * (s_.ambient + s_.diffuse * diffuse) * lc + lc * (s_.specular * specular);
@@ -71,6 +72,7 @@ class ShadingModel {
  private:
   const Shading& s_;
   Vec3d light_position_, light_direction_;
+  unsigned shininess_power_;  // the shininess when it is a whole number (then no pow), else 0
 };
 
 /// @brief The unit normal of a field gradient g (world units), facing against the ray
