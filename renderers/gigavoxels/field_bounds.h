@@ -20,9 +20,9 @@ struct BrickDifferences {
   float first[3], second[3], mixed[3];  // mixed: xy, xz, yz
 };
 
-/// An e^3 brick's differences (e >= 3), row by row: each a plain loop over x into independent lanes, which the
-/// compiler vectorises for 8- and 16-bit voxels (in integers) and pipelines for floats (a max
-/// reduction in floats does not vectorise).
+/// An e^3 brick's differences (e >= 3), row by row: each a plain loop over x into independent
+/// lanes, which the compiler vectorises for 8- and 16-bit voxels (in integers) and pipelines
+/// for floats (a max reduction in floats does not vectorise).
 template <typename Voxel>
 BrickDifferences brick_differences(const Voxel* v, size_t e) {
   constexpr bool small_integers = std::is_integral_v<Voxel> && sizeof(Voxel) <= 2;

@@ -54,6 +54,7 @@ using gigavoxels::BrickDifferences;
 using gigavoxels::FieldBounds;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Feedback entries: a node address and what the ray wants of it.
 constexpr uint32_t kAddressMask = 0x3fffffffu;
 constexpr uint32_t kWantsSubdivision = 0x80000000u;
@@ -268,6 +269,7 @@ class GigaVoxelsRenderer final : public Renderer {
     group_count_ = group_count(m_);
     group_distances_.assign(size_t(tree_.brick_capacity()) * group_count_, 0);
     brick_differences_.assign(size_t(tree_.brick_capacity()), BrickDifferences{});
+    search_hidden_crossings_ = scene_.mode == RenderMode::iso && p.hidden_crossings > 0;
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -412,7 +414,7 @@ class GigaVoxelsRenderer final : public Renderer {
           distance[i] = !(lo <= hi) || scene_.value_range_visible(lo, hi) ? 0 : 1;
         }
     gigavoxels::chessboard_distances(groups_, distance);
-    if (scene_.mode == RenderMode::iso && p_.hidden_crossings > 0)  // only the search reads them
+    if (search_hidden_crossings_)  // only the search reads them
       brick_differences_[slot] = gigavoxels::brick_differences(v, size_t(e));
   }
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
@@ -731,7 +733,7 @@ class GigaVoxelsRenderer final : public Renderer {
       bool small = false;  // every |hi| < 2^53
     };
     void scale_eye() {
-      if (scaled_eye_valid && eye[0] == scaled_eye_of[0] && eye[1] == scaled_eye_of[1] && eye[2] == scaled_eye_of[2]) return;
+      if (eye[0] == scaled_eye_of[0] && eye[1] == scaled_eye_of[1] && eye[2] == scaled_eye_of[2]) return;
       for (size_t d = 0; d < scaled_eye.size(); ++d) {
         const Scale& s = r.scales_[d];
         for (int a = 0; a < 3; ++a) {
@@ -742,7 +744,6 @@ class GigaVoxelsRenderer final : public Renderer {
         scaled_eye[d].small = std::abs(hi[0]) < 0x1p53 && std::abs(hi[1]) < 0x1p53 && std::abs(hi[2]) < 0x1p53;
       }
       std::copy_n(eye, 3, scaled_eye_of);
-      scaled_eye_valid = true;
     }
     /// The ray's direction in the frame of a node at a depth.
     void aim(NodeFrame& f, int depth) const {
@@ -782,7 +783,6 @@ class GigaVoxelsRenderer final : public Renderer {
       const int n = r.n_;
       double t = s.t;
       double hit_t = kInf;
-      Vec3d hit_gradient(0.0);
       bool requested = false;
       uint32_t prev_node = gigavoxels::kNoAddress;  // iso: whose brick s.prev_value was sampled from
       CachedBounds bounds;
@@ -955,7 +955,7 @@ class GigaVoxelsRenderer final : public Renderer {
           // Iso: the first crossing the step from the previous sample to t hides (hit_t), if any.
           const auto hidden_hit = [&](std::optional<float> value_at_t) {
             Bracket hidden;
-            if (!s.have_prev || bl.coarse || r.p_.hidden_crossings == 0 ||
+            if (!r.search_hidden_crossings_ || !s.have_prev || bl.coarse ||
                 !hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, s.prev_t, t, s.prev_value, value_at_t, hidden))
               return false;
             hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
@@ -1186,8 +1186,7 @@ class GigaVoxelsRenderer final : public Renderer {
     std::vector<PathNode> path;
     int path_size = 0;
     std::vector<ScaledEye> scaled_eye;  // per depth, for the eye scaled_eye_of
-    double scaled_eye_of[3] = {};
-    bool scaled_eye_valid = false;
+    double scaled_eye_of[3] = {kNaN, kNaN, kNaN};  // none yet
     int hit_surface = -1;
     int face_axis = -1;
     Levels hit_levels;
@@ -1215,6 +1214,7 @@ class GigaVoxelsRenderer final : public Renderer {
   size_t group_count_ = 729;  // cell groups per brick
   std::vector<uint8_t> group_distances_;  // brick_capacity() x group_count_
   std::vector<BrickDifferences> brick_differences_;  // per slot (set_brick_bounds)
+  bool search_hidden_crossings_ = false;  // iso with hidden_crossings > 0
   gigavoxels::PreintegratedTf preintegrated_;
 
   // Per frame: the feedback buffer and the rays' states, written by the render threads (each
