@@ -76,9 +76,9 @@ struct GigaVoxelsParams {
   double amplify_amplitude = 0.05, amplify_gain = 0.5;
   int amplify_seed = 1;
   int max_passes = 256;        // exact mode
-  int refine = 6;
+  int refine = 10;
   bool skip_cells = true;      // leap the cells of a brick that hold nothing visible
-  int hidden_crossings = 4;    // iso: halvings of a step searched for a crossing pair it may hide (0: none)
+  int hidden_crossings = 5;    // iso: a step is searched for a crossing pair it may hide, down to 2^-this voxels (0: none)
 };
 
 using gigavoxels::kCellGroup;
@@ -104,10 +104,43 @@ class Source {
 /// A store's brick octree is the N = 2 tree: a node at depth d is the brick of level d.
 BrickKey store_key(const NodeAddress& a) { return {uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)}; }
 
+/// A node's range in the store is its own level's (of the cells its brick interpolates), and
+/// averaging narrows it: a feature finer than a level (a small object, a sheet thinner than
+/// its voxels) can be missing from that level's range altogether. What a node can show at any
+/// depth is the union of its range with its descendants', down to the finest level.
+struct ValueSpan {
+  float lo, hi;
+};
+std::vector<std::vector<ValueSpan>> subtree_ranges(const NodeTable& nodes) {
+  const StoreLayout& layout = nodes.layout();
+  std::vector<std::vector<ValueSpan>> below(size_t(layout.levels));
+  for (int l = layout.finest(); l >= 0; --l) {
+    const Vec3s n = layout.level_bricks(l);
+    auto& spans = below[size_t(l)];
+    spans.resize(nodes.level(l).size());
+    for (int64_t z = 0; z < n.z; ++z)
+      for (int64_t y = 0; y < n.y; ++y)
+        for (int64_t x = 0; x < n.x; ++x) {
+          const BrickKey k{uint32_t(l), uint32_t(x), uint32_t(y), uint32_t(z)};
+          const NodeRecord& r = nodes.at(k);
+          ValueSpan s{r.min, r.max};
+          if (l < layout.finest())
+            for (int c = 0; c < 8; ++c) {
+              const BrickKey child{uint32_t(l + 1), uint32_t(2 * x + (c & 1)), uint32_t(2 * y + (c >> 1 & 1)), uint32_t(2 * z + (c >> 2))};
+              if (!layout.contains(child)) continue;
+              const ValueSpan& cs = below[size_t(l + 1)][size_t(layout.linear_index(child))];
+              s.lo = std::min(s.lo, cs.lo), s.hi = std::max(s.hi, cs.hi);
+            }
+          spans[size_t(layout.linear_index(k))] = s;
+        }
+  }
+  return below;
+}
+
 template <typename Stored>
 class StoreSource final : public Source {
  public:
-  explicit StoreSource(const RenderContext& ctx) : ctx_(ctx), layout_(ctx.layout()) {}
+  explicit StoreSource(const RenderContext& ctx) : ctx_(ctx), layout_(ctx.layout()), below_(subtree_ranges(ctx.nodes())) {}
   int arity() const override { return 2; }
   int brick_size() const override { return layout_.brick_size; }
   int max_depth() const override { return layout_.finest(); }
@@ -116,20 +149,28 @@ class StoreSource final : public Source {
     NodeContent c;
     if (!layout_.contains(k)) return c;  // outside the volume: nothing
     const NodeRecord& n = ctx_.nodes().at(k);
-    c.lo = n.min, c.hi = n.max;
-    // Nodes this scene cannot see are constants that contribute nothing (their minimum is
-    // outside every isovalue's range, or maps to zero opacity).
-    if (n.is_constant()) c.value = n.constant;
-    else if (!ctx_.node_visible(n)) c.value = std::numeric_limits<float>::quiet_NaN();  // nothing to see
+    const ValueSpan& below = this->below(k);
+    c.lo = below.lo, c.hi = below.hi;
+    // A constant node is a constant region only when everything below it is that constant too.
+    // Nodes this scene cannot see, down to the finest level, are constants that contribute
+    // nothing (no isovalue in their range, or zero opacity all over it).
+    if (n.is_constant() && below.lo == below.hi) c.value = n.constant;
+    else if (!ctx_.scene().value_range_visible(below.lo, below.hi)) c.value = std::numeric_limits<float>::quiet_NaN();
     else c.kind = NodeContent::brick;
     return c;
   }
   bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
     const BrickKey k = store_key(a);
     BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, true);
+    const int64_t m = layout_.brick_size, e = m + 2;
+    if (h.constant()) {  // a level's constant over a subtree that is not
+      std::fill_n(out, e * e * e, h.constant_value());
+      ++loaded_;
+      return true;
+    }
     if (!h.resident()) return false;
     const Stored* src = h.template voxels<Stored>();
-    const int64_t m = layout_.brick_size, e = m + 2, es = ctx_.cache().format().edge(), skip = ctx_.cache().format().apron - 1;
+    const int64_t es = ctx_.cache().format().edge(), skip = ctx_.cache().format().apron - 1;
     for (int64_t z = 0; z < e; ++z)
       for (int64_t y = 0; y < e; ++y) {
         const Stored* row = src + ((z + skip) * es + (y + skip)) * es + skip;
@@ -140,10 +181,12 @@ class StoreSource final : public Source {
     return true;
   }
   uint64_t loaded() const override { return loaded_; }
+  const ValueSpan& below(const BrickKey& k) const { return below_[k.level][size_t(layout_.linear_index(k))]; }
 
  private:
   const RenderContext& ctx_;
   const StoreLayout& layout_;
+  std::vector<std::vector<ValueSpan>> below_;  // per level, per node: the range down to the finest level
   uint64_t loaded_ = 0;
 };
 
@@ -190,14 +233,14 @@ class AmplifiedSource final : public Source {
     float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
     for (int n = 0; n < 8; ++n) {
       const BrickKey b{k.level, k.x - ((n & 1) && k.x > 0), k.y - ((n & 2) && k.y > 0), k.z - ((n & 4) && k.z > 0)};
-      const NodeRecord& r = ctx_.nodes().at(b);
-      lo = std::min(lo, r.min), hi = std::max(hi, r.max);
+      const ValueSpan& r = stored_.below(b);
+      lo = std::min(lo, r.lo), hi = std::max(hi, r.hi);
     }
     const double detail = producer_->detail_bound(a.depth > s ? a.depth : max_depth());
     c.lo = float(lo - detail), c.hi = float(hi + detail);
     const NodeRecord& n = ctx_.nodes().at(k);
     if (!ctx_.scene().value_range_visible(c.lo, c.hi)) c.value = std::numeric_limits<float>::quiet_NaN();
-    else if (a.depth <= s && n.is_constant() && detail == 0) c.value = n.constant;
+    else if (a.depth <= s && n.is_constant() && stored_.below(k).lo == stored_.below(k).hi && detail == 0) c.value = n.constant;
     else c.kind = NodeContent::brick;
     return c;
   }
@@ -269,7 +312,6 @@ class GigaVoxelsRenderer final : public Renderer {
     group_count_ = group_count(m_);
     group_distances_.assign(size_t(tree_.brick_capacity()) * group_count_, 0);
     brick_differences_.assign(size_t(tree_.brick_capacity()), BrickDifferences{});
-    search_hidden_crossings_ = scene_.mode == RenderMode::iso && p.hidden_crossings > 0;
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -289,6 +331,10 @@ class GigaVoxelsRenderer final : public Renderer {
     const double factor = scene_.mode == RenderMode::iso ? scene_.quality.step_factor
                                                          : scene_.quality.step_factor / scene_.sampling_rate;
     step_ = p.step * factor;
+    // Halvings down to parts of 2^-hidden_crossings voxels whatever the step, so that a coarser
+    // step costs fewer samples, not thinner features missed.
+    search_halvings_ = p.hidden_crossings > 0 ? p.hidden_crossings + int(std::ceil(std::log2(step_) - 1e-9)) : 0;
+    search_hidden_crossings_ = scene_.mode == RenderMode::iso && search_halvings_ > 0;
     finest_voxel_unit_ = 1.0 / extent_;  // one finest voxel in unit coordinates (opacity reference)
     tree_.set_root(root_node(), NodeAddress{});
     if (p.source != 1 && ctx.cache().format().apron < 1)  // the sponge reads no stored brick
@@ -519,7 +565,8 @@ class GigaVoxelsRenderer final : public Renderer {
   /// What a ray has done so far: exact mode interrupts rays at missing data and resumes them.
   struct RayState {
     enum Status : uint8_t { fresh, interrupted, done } status = fresh;
-    double t = 0;
+    double t = 0;         // where the next descent locates the ray's node
+    double t_sample = 0;  // where the next sample goes: past t when the step outreaches the node
     Vec3d accum{0.0};
     double alpha = 0;
     double prev_t = 0;
@@ -637,13 +684,8 @@ class GigaVoxelsRenderer final : public Renderer {
     /// leaves it, or when clear, the cube of clear groups around it; and, when clear, one of its
     /// voxels (every value in the cube is on that voxel's side of every isovalue).
     bool clear_group(const PathNode& b, double t, double& t_leave, float& voxel) const {
-      const double top = double(r.m_ + 1);
       int g[3];
-      for (int a = 0; a < 3; ++a) {
-        const double l = std::min(std::max((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5, 0.0), top);
-        g[a] = int(unsigned(l) / unsigned(kCellGroup));  // l >= 0
-      }
-      const int i = (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
+      const int i = group_at(b, t, g);
       const int reach = std::max(int(b.group_distances[i]) - 1, 0);  // clear groups on every side
       t_leave = kInf;
       for (int a = 0; a < 3; ++a) {
@@ -655,6 +697,28 @@ class GigaVoxelsRenderer final : public Renderer {
       const size_t e = size_t(r.m_) + 2;
       voxel = float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
       return true;
+    }
+
+    /// The cell group of brick b at t: its index, and its coordinates in g.
+    int group_at(const PathNode& b, double t, int g[3]) const {
+      const double top = double(r.m_ + 1);
+      for (int a = 0; a < 3; ++a) {
+        const double l = std::min(std::max((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5, 0.0), top);
+        g[a] = int(unsigned(l) / unsigned(kCellGroup));  // l >= 0
+      }
+      return (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
+    }
+    /// Where the ray enters the cube of clear groups around t that clear_group leaps (t is in it).
+    double clear_cube_entry(const PathNode& b, double t) const {
+      int g[3];
+      const int reach = std::max(int(b.group_distances[group_at(b, t, g)]) - 1, 0);
+      double t_enter = -kInf;
+      for (int a = 0; a < 3; ++a) {
+        if (b.frame.dir[a] == 0) continue;
+        const double face = double((b.frame.dir[a] > 0 ? g[a] - reach : g[a] + reach + 1) * kCellGroup);
+        t_enter = std::max(t_enter, ((face - 0.5) * r.inv_m_ - b.frame.eye[a]) * b.frame.inv_dir[a]);
+      }
+      return t_enter;
     }
 
     /// clear_group for what a sample at lambda reads; t_leave is where the answer may change.
@@ -678,7 +742,7 @@ class GigaVoxelsRenderer final : public Renderer {
       px.color = r.scene_.background;
       if (ray.hits()) {
         if (s.status == RayState::fresh) {
-          s.t = ray.span.t0;
+          s.t = s.t_sample = ray.span.t0;
           // A procedural volume is empty outside its box: entering a solid region is a surface.
           if (r.outside_value_) s.prev_value = *r.outside_value_, s.prev_t = s.t, s.have_prev = true;
         }
@@ -781,22 +845,25 @@ class GigaVoxelsRenderer final : public Renderer {
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
       const double stop = r.scene_.quality.termination_opacity;
       const int n = r.n_;
-      double t = s.t;
+      // Descents and samples advance apart: a step may reach past the next node, which is still
+      // entered (searched, its exit sampled), or a thin node would hide what is in it.
+      double t_at = s.t, t = s.t_sample;
       double hit_t = kInf;
       bool requested = false;
       uint32_t prev_node = gigavoxels::kNoAddress;  // iso: whose brick s.prev_value was sampled from
       CachedBounds bounds;
+      double clear_until = -kInf;  // iso: the clear groups the last leap passed end here
       int exit_axis = -1;
       aim_path_along_ray();
-      while (t < ray.span.t1) {
-        const double entry_fp = footprint(t);
-        // kd-restart: the descent from the root to the node at t whose voxels match the
+      while (t_at < ray.span.t1) {
+        const double entry_fp = footprint(t_at);
+        // kd-restart: the descent from the root to the node at t_at whose voxels match the
         // footprint. The nodes it passes through are the last descent's as far as they still
-        // contain t (and are no coarser than the footprint asks), so it resumes from the
+        // contain t_at (and are no coarser than the footprint asks), so it resumes from the
         // deepest of those; the path and the levels collected are the same as from the root.
         int restart = 0;
         for (int i = path_size - 1; i > 0; --i)
-          if (path[i].contains(t)) {
+          if (path[i].contains(t_at)) {
             restart = i;
             break;
           }
@@ -835,7 +902,7 @@ class GigaVoxelsRenderer final : public Renderer {
           PathNode& child = path[depth + 1];
           int index = 0, stride = 1;
           for (int a = 0; a < 3; ++a, stride *= n) {
-            const int64_t ci = child_index((p->frame.eye[a] + p->frame.dir[a] * t) * n, n);
+            const int64_t ci = child_index((p->frame.eye[a] + p->frame.dir[a] * t_at) * n, n);
             child.c[a] = p->c[a] * n + ci;
             index += int(ci) * stride;
           }
@@ -861,16 +928,16 @@ class GigaVoxelsRenderer final : public Renderer {
           const double ta = ((frame.dir[a] > 0 ? 1.0 : 0.0) - frame.eye[a]) * frame.inv_dir[a];
           if (ta < t_exit) t_exit = ta, exit_axis = a;
         }
-        const double t_face = std::min(std::max(t_exit, t), ray.span.t1);
+        const double t_face = std::min(std::max(t_exit, t_at), ray.span.t1);
         // A hair past the exit, so the next descent lands in the next node.
         const double node_t = 1.0 / scale / unit_per_t;
-        t_exit = std::max(t_exit, t) + 1e-7 * node_t;
+        t_exit = std::max(t_exit, t_at) + 1e-7 * node_t;
         rec.used(address);
         if (want && !requested) {
           rec.request(address | want);
           requested = true;
           if (r.allow_interrupt_) {
-            s.t = t;
+            s.t = t_at, s.t_sample = t;
             s.status = RayState::interrupted;
             return;
           }
@@ -884,9 +951,9 @@ class GigaVoxelsRenderer final : public Renderer {
             // A constant region is a sample of known value all along it: the surface is at its
             // face when the value steps across an isovalue there.
             for (size_t k = 0; k < r.scene_.isosurfaces.size(); ++k)
-              if (v == r.scene_.isosurfaces[k].value) hit_t = std::min(hit_t, t), hit_surface = int(k);
+              if (v == r.scene_.isosurfaces[k].value) hit_t = std::min(hit_t, t_at), hit_surface = int(k);
             const int crossed = hit_t == kInf && s.have_prev ? first_crossed(s.prev_value, v) : -1;
-            if (crossed >= 0) hit_t = t, hit_surface = crossed;
+            if (crossed >= 0) hit_t = t_at, hit_surface = crossed;
             if (hit_t < kInf) {
               hit_levels.count = 0;  // a face: its normal is the axis the ray entered through
               face_axis = entry_axis;
@@ -895,18 +962,20 @@ class GigaVoxelsRenderer final : public Renderer {
             s.prev_value = v, s.prev_t = t_face, s.have_prev = true;
             prev_node = gigavoxels::kNoAddress;
           } else {
+            // From the last step's end: the step into this node integrated up to it.
+            const double from = std::max(t, t_at);
             Vec3f col;
             float a;
-            r.preintegrated_.segment(float(v), float(v), (t_end - t) * unit_per_t / r.finest_voxel_unit_, col, a);
-            composite(s, px, col, a, t, Vec3d(0.0), ray);
+            r.preintegrated_.segment(float(v), float(v), (t_end - from) * unit_per_t / r.finest_voxel_unit_, col, a);
+            composite(s, px, col, a, from, Vec3d(0.0), ray);
             if (s.alpha >= stop) break;
           }
-          t = t_exit;
+          t = t_at = t_exit;
           continue;
         }
         if (lv.count == 0) {  // nothing resident yet, not even the root's brick
           s.have_prev = false;
-          t = t_exit;
+          t = t_at = t_exit;
           continue;
         }
         ++counters.bricks;
@@ -919,6 +988,7 @@ class GigaVoxelsRenderer final : public Renderer {
         // only grows along the ray), every step has that level alone and the same length.
         const bool finest_only = footprint(t_end) <= fine_voxel;
         const double finest_dt = r.step_ * fine_voxel / unit_per_t;
+        t = std::max(t, t_at);
         // Iso: one more sample at the node's exit, so that a crossing in the last part-step is
         // bracketed even when the next node is empty.
         for (bool last = false; !last;) {
@@ -953,10 +1023,13 @@ class GigaVoxelsRenderer final : public Renderer {
             t_before = t_next - dt;  // the last position in the clear groups
           }
           // Iso: the first crossing the step from the previous sample to t hides (hit_t), if any.
+          // The clear groups a leap passed, and those around t when a voxel stands in for its
+          // value, are not searched: every value in them is on one side of every isovalue.
           const auto hidden_hit = [&](std::optional<float> value_at_t) {
+            if (!r.search_hidden_crossings_ || !s.have_prev || bl.coarse) return false;
+            const double from = std::max(s.prev_t, clear_until), to = value_at_t ? t : clear_cube_entry(*bl.finer, t);
             Bracket hidden;
-            if (!r.search_hidden_crossings_ || !s.have_prev || bl.coarse ||
-                !hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, s.prev_t, t, s.prev_value, value_at_t, hidden))
+            if (!hidden_crossing(*bl.finer, bounds.of(*bl.finer, *this), prev_node, from, to, s.prev_value, value_at_t, hidden))
               return false;
             hit_t = refine_hit(lv, lam, hidden.t0, hidden.t1, hidden.v0, hidden.v1);
             return true;
@@ -975,6 +1048,7 @@ class GigaVoxelsRenderer final : public Renderer {
             }
             s.prev_value = voxel, s.prev_t = t_before, s.have_prev = true;
             prev_node = gigavoxels::kNoAddress;
+            clear_until = t_leave;
             t = t_next;
             continue;
           }
@@ -1025,7 +1099,7 @@ class GigaVoxelsRenderer final : public Renderer {
           t += dt;
         }
         if (finished) break;
-        t = std::max(t, t_exit);
+        t_at = t_exit;
       }
       s.status = RayState::done;
       if (iso) {
@@ -1052,8 +1126,8 @@ class GigaVoxelsRenderer final : public Renderer {
     /// between them (a ray grazing a surface, a sheet thinner than the step). A crossing pair
     /// needs both: the ends near enough to an isovalue for the field to reach it and come back
     /// (FieldBounds::slope), and the chord between them near enough for the field to stray to
-    /// it (FieldBounds::stray). Where both allow one, the step is halved, up to
-    /// hidden_crossings times, until each part is cleared or shows a crossing.
+    /// it (FieldBounds::stray). Where both allow one, the step is halved until each part is
+    /// cleared or shows a crossing, or is 2^-hidden_crossings voxels long (search_halvings_).
     struct Bracket {
       double t0 = 0, t1 = 0;
       float v0 = 0, v1 = 0;
@@ -1077,17 +1151,21 @@ class GigaVoxelsRenderer final : public Renderer {
     /// The first crossing hidden between the samples v0 at t0 and v1 at t1 of brick b's node.
     /// v0 may be something else's (prev_node: another node's brick, a clear group's voxel), and
     /// t0 in nodes the step went past: then only the part of the step in b's node is searched,
-    /// from this brick's own value where the ray enters it. Without v1 (t1 in a clear group,
-    /// which a voxel stood in for), this brick's value there ends the step.
+    /// from this brick's own value where the ray enters it. Without v1 (t1 where the clear
+    /// groups a voxel stands in for begin), this brick's value there ends the step.
     bool hidden_crossing(const PathNode& b, const FieldBounds& f, uint32_t prev_node, double t0, double t1, float v0,
                          std::optional<float> v1, Bracket& out) {
       const bool own_v0 = prev_node == b.address;
-      if (own_v0 && v1) return search_halves(b, f, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
-      if (!own_v0 && !v1) return false;
-      if (!own_v0) {
+      if (own_v0 && v1) return search_halves(b, f, t0, t1, v0, *v1, r.search_halvings_, out);
+      if (!own_v0)
         for (int a = 0; a < 3; ++a)
           if (b.frame.dir[a] != 0) t0 = std::max(t0, ((b.frame.dir[a] > 0 ? 0.0 : 1.0) - b.frame.eye[a]) / b.frame.dir[a]);
-        if (!(t0 < t1)) return false;
+      if (!(t0 < t1)) return false;
+      if (!own_v0 && !v1) {  // between clear groups (or from another node into them): neither end known
+        counters.samples += 2;
+        v0 = sample_brick(b, t0, nullptr), v1 = sample_brick(b, t1, nullptr);
+        if (crossing(v0, *v1)) return out = {t0, t1, v0, *v1}, true;
+        return search_halves(b, f, t0, t1, v0, *v1, r.search_halvings_, out);
       }
       // With one end known, f must still get from an isovalue to it within the step.
       const double known = own_v0 ? v0 : *v1;
@@ -1098,7 +1176,7 @@ class GigaVoxelsRenderer final : public Renderer {
       if (own_v0) v1 = sample_brick(b, t1, nullptr);
       else v0 = sample_brick(b, t0, nullptr);
       if (crossing(v0, *v1)) return out = {t0, t1, v0, *v1}, true;
-      return search_halves(b, f, t0, t1, v0, *v1, r.p_.hidden_crossings, out);
+      return search_halves(b, f, t0, t1, v0, *v1, r.search_halvings_, out);
     }
     /// Whether f can cross an isovalue twice between the values v0 and v1, dt apart, both on
     /// the same side of every isovalue.
@@ -1122,6 +1200,10 @@ class GigaVoxelsRenderer final : public Renderer {
     }
 
     double refine_hit(const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
+      // Bisected down to 2^-refine voxels of the level sampled, whatever the bracket's length.
+      const NodeFrame& frame = blend(lv, lambda).finer->frame;
+      const double voxels = (t1 - t0) * double(r.m_) * std::sqrt(frame.dir[0] * frame.dir[0] + frame.dir[1] * frame.dir[1] + frame.dir[2] * frame.dir[2]);
+      const int steps = std::clamp(r.p_.refine + int(std::ceil(std::log2(voxels))), 0, 60);
       // The first surface crossed between the two samples.
       double best = t1;
       for (const auto& surface : r.scene_.isosurfaces) {
@@ -1133,7 +1215,7 @@ class GigaVoxelsRenderer final : public Renderer {
               ++counters.samples;
               return double(sample(lv, lambda, m, nullptr)) - iso;
             },
-            t0, t1, g0, g1, r.p_.refine);
+            t0, t1, g0, g1, steps);
         if (th < best) best = th, hit_surface = int(&surface - r.scene_.isosurfaces.data());
       }
       hit_levels = lv;
@@ -1214,7 +1296,8 @@ class GigaVoxelsRenderer final : public Renderer {
   size_t group_count_ = 729;  // cell groups per brick
   std::vector<uint8_t> group_distances_;  // brick_capacity() x group_count_
   std::vector<BrickDifferences> brick_differences_;  // per slot (set_brick_bounds)
-  bool search_hidden_crossings_ = false;  // iso with hidden_crossings > 0
+  int search_halvings_ = 0;                // of a step: to parts of 2^-hidden_crossings voxels
+  bool search_hidden_crossings_ = false;  // iso with search_halvings_ > 0
   gigavoxels::PreintegratedTf preintegrated_;
 
   // Per frame: the feedback buffer and the rays' states, written by the render threads (each
@@ -1263,11 +1346,11 @@ BackendEntry gigavoxels_backend() {
       {"amplify_gain", 0.5, 0, 4, "source=2: amplitude ratio between successive octaves"},
       {"amplify_seed", 1, 0, 1e9, "source=2: noise seed"},
       {"max_passes", 256, 1, 100000, "exact mode: passes per frame before the rest of the frame takes coarser data"},
-      {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
+      {"refine", 10, 0, 40, "iso: a crossing is bisected down to 2^-refine voxels, then placed by the secant"},
       {"skip_cells", 1, 0, 1, "1: rays leap the 4^3-cell groups of a brick that hold nothing visible, as many at once as "
                               "their distance to a visible group allows; 0: every step samples"},
-      {"hidden_crossings", 4, 0, 20, "iso: halvings of a step searched for a pair of crossings its two samples may hide, "
-                                     "where the brick's slope bound allows one (0: none)"},
+      {"hidden_crossings", 5, 0, 20, "iso: a step is searched for a pair of crossings its two samples may hide, down to parts "
+                                     "of 2^-hidden_crossings voxels, where the brick's bounds allow one (0: none)"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
