@@ -42,6 +42,35 @@ double BackendParams::operator[](const std::string& name) const {
   return it->second;
 }
 
+const RenderContext::ValueSpan& RenderContext::range_below(const BrickKey& k) const {
+  std::call_once(ranges_below_once_, [this] {
+    const NodeTable& table = nodes();
+    const StoreLayout& layout = table.layout();
+    ranges_below_.resize(size_t(layout.levels));
+    for (int l = layout.finest(); l >= 0; --l) {
+      const Vec3s n = layout.level_bricks(l);
+      auto& spans = ranges_below_[size_t(l)];
+      spans.resize(table.level(l).size());
+      for (int64_t z = 0; z < n.z; ++z)
+        for (int64_t y = 0; y < n.y; ++y)
+          for (int64_t x = 0; x < n.x; ++x) {
+            const BrickKey key{uint32_t(l), uint32_t(x), uint32_t(y), uint32_t(z)};
+            const NodeRecord& r = table.at(key);
+            ValueSpan s{r.min, r.max};
+            if (l < layout.finest())
+              for (int c = 0; c < 8; ++c) {
+                const BrickKey child = key.child(c);
+                if (!layout.contains(child)) continue;
+                const ValueSpan& below = ranges_below_[size_t(l + 1)][size_t(layout.linear_index(child))];
+                s.lo = std::min(s.lo, below.lo), s.hi = std::max(s.hi, below.hi);
+              }
+            spans[size_t(layout.linear_index(key))] = s;
+          }
+    }
+  });
+  return ranges_below_[k.level][size_t(layout().linear_index(k))];
+}
+
 RenderContext::RenderContext(const Scene& scene, BrickCache& cache) : scene_(scene), cache_(cache) {
   const Manifest& m = cache.store().manifest();
   VolumeGeometry& g = geometry_;

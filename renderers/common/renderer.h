@@ -16,6 +16,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -94,6 +95,20 @@ class RenderContext {
   /// the transfer function's non-zero opacity (the scene's value filter). Nodes that cannot are
   /// never fetched.
   bool node_visible(const NodeRecord& n) const { return scene_.value_range_visible(n.min, n.max); }
+  /// @brief The value range of a node and of every node below it, down to the finest level.
+  /// A node's own range is its level's, which averaging narrows: a feature finer than the level
+  /// (a small object, a sheet thinner than its voxels) can be missing from it altogether, so a
+  /// back end that stops above the finest level decides what it can skip by this range.
+  /// Computed on first use (one pass over the node table), then read by any thread.
+  struct ValueSpan {
+    float lo = 0, hi = 0;
+  };
+  const ValueSpan& range_below(const BrickKey& k) const;
+  /// @brief node_visible() for a node and everything below it (range_below()).
+  bool subtree_visible(const BrickKey& k) const {
+    const ValueSpan& r = range_below(k);
+    return scene_.value_range_visible(r.lo, r.hi);
+  }
   /// @brief Whether the renderer must compute gradients: shading is on, or normals are asked for.
   bool needs_gradients(const FrameOutputs& outputs) const {
     return outputs.normals || (scene_.shading.lit() && scene_.mode != RenderMode::mip);
@@ -103,6 +118,8 @@ class RenderContext {
   const Scene& scene_;
   BrickCache& cache_;
   VolumeGeometry geometry_;
+  mutable std::once_flag ranges_below_once_;
+  mutable std::vector<std::vector<ValueSpan>> ranges_below_;  // per level, per node
 };
 
 /// @brief One frame to render: the camera in world coordinates and what to produce.

@@ -104,43 +104,10 @@ class Source {
 /// A store's brick octree is the N = 2 tree: a node at depth d is the brick of level d.
 BrickKey store_key(const NodeAddress& a) { return {uint32_t(a.depth), uint32_t(a.x), uint32_t(a.y), uint32_t(a.z)}; }
 
-/// A node's range in the store is its own level's (of the cells its brick interpolates), and
-/// averaging narrows it: a feature finer than a level (a small object, a sheet thinner than
-/// its voxels) can be missing from that level's range altogether. What a node can show at any
-/// depth is the union of its range with its descendants', down to the finest level.
-struct ValueSpan {
-  float lo, hi;
-};
-std::vector<std::vector<ValueSpan>> subtree_ranges(const NodeTable& nodes) {
-  const StoreLayout& layout = nodes.layout();
-  std::vector<std::vector<ValueSpan>> below(size_t(layout.levels));
-  for (int l = layout.finest(); l >= 0; --l) {
-    const Vec3s n = layout.level_bricks(l);
-    auto& spans = below[size_t(l)];
-    spans.resize(nodes.level(l).size());
-    for (int64_t z = 0; z < n.z; ++z)
-      for (int64_t y = 0; y < n.y; ++y)
-        for (int64_t x = 0; x < n.x; ++x) {
-          const BrickKey k{uint32_t(l), uint32_t(x), uint32_t(y), uint32_t(z)};
-          const NodeRecord& r = nodes.at(k);
-          ValueSpan s{r.min, r.max};
-          if (l < layout.finest())
-            for (int c = 0; c < 8; ++c) {
-              const BrickKey child{uint32_t(l + 1), uint32_t(2 * x + (c & 1)), uint32_t(2 * y + (c >> 1 & 1)), uint32_t(2 * z + (c >> 2))};
-              if (!layout.contains(child)) continue;
-              const ValueSpan& cs = below[size_t(l + 1)][size_t(layout.linear_index(child))];
-              s.lo = std::min(s.lo, cs.lo), s.hi = std::max(s.hi, cs.hi);
-            }
-          spans[size_t(layout.linear_index(k))] = s;
-        }
-  }
-  return below;
-}
-
 template <typename Stored>
 class StoreSource final : public Source {
  public:
-  explicit StoreSource(const RenderContext& ctx) : ctx_(ctx), layout_(ctx.layout()), below_(subtree_ranges(ctx.nodes())) {}
+  explicit StoreSource(const RenderContext& ctx) : ctx_(ctx), layout_(ctx.layout()) {}
   int arity() const override { return 2; }
   int brick_size() const override { return layout_.brick_size; }
   int max_depth() const override { return layout_.finest(); }
@@ -149,13 +116,13 @@ class StoreSource final : public Source {
     NodeContent c;
     if (!layout_.contains(k)) return c;  // outside the volume: nothing
     const NodeRecord& n = ctx_.nodes().at(k);
-    const ValueSpan& below = this->below(k);
+    const RenderContext::ValueSpan& below = ctx_.range_below(k);
     c.lo = below.lo, c.hi = below.hi;
     // A constant node is a constant region only when everything below it is that constant too.
     // Nodes this scene cannot see, down to the finest level, are constants that contribute
     // nothing (no isovalue in their range, or zero opacity all over it).
     if (n.is_constant() && below.lo == below.hi) c.value = n.constant;
-    else if (!ctx_.scene().value_range_visible(below.lo, below.hi)) c.value = std::numeric_limits<float>::quiet_NaN();
+    else if (!ctx_.subtree_visible(k)) c.value = std::numeric_limits<float>::quiet_NaN();
     else c.kind = NodeContent::brick;
     return c;
   }
@@ -181,12 +148,10 @@ class StoreSource final : public Source {
     return true;
   }
   uint64_t loaded() const override { return loaded_; }
-  const ValueSpan& below(const BrickKey& k) const { return below_[k.level][size_t(layout_.linear_index(k))]; }
 
  private:
   const RenderContext& ctx_;
   const StoreLayout& layout_;
-  std::vector<std::vector<ValueSpan>> below_;  // per level, per node: the range down to the finest level
   uint64_t loaded_ = 0;
 };
 
@@ -233,14 +198,14 @@ class AmplifiedSource final : public Source {
     float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
     for (int n = 0; n < 8; ++n) {
       const BrickKey b{k.level, k.x - ((n & 1) && k.x > 0), k.y - ((n & 2) && k.y > 0), k.z - ((n & 4) && k.z > 0)};
-      const ValueSpan& r = stored_.below(b);
+      const RenderContext::ValueSpan& r = ctx_.range_below(b);
       lo = std::min(lo, r.lo), hi = std::max(hi, r.hi);
     }
     const double detail = producer_->detail_bound(a.depth > s ? a.depth : max_depth());
     c.lo = float(lo - detail), c.hi = float(hi + detail);
     const NodeRecord& n = ctx_.nodes().at(k);
     if (!ctx_.scene().value_range_visible(c.lo, c.hi)) c.value = std::numeric_limits<float>::quiet_NaN();
-    else if (a.depth <= s && n.is_constant() && stored_.below(k).lo == stored_.below(k).hi && detail == 0) c.value = n.constant;
+    else if (a.depth <= s && n.is_constant() && ctx_.range_below(k).lo == ctx_.range_below(k).hi && detail == 0) c.value = n.constant;
     else c.kind = NodeContent::brick;
     return c;
   }

@@ -147,7 +147,7 @@ class GobbettiRenderer final : public Renderer {
   NodeUse use_of(const BrickKey& k, const Camera& cam, int width, int height) const {
     if (!ctx_.cache().layout().contains(k)) return NodeUse::empty;
     const NodeRecord& n = ctx_.nodes().at(k);
-    if (!ctx_.node_visible(n)) return NodeUse::empty;
+    if (!ctx_.subtree_visible(k)) return NodeUse::empty;  // its own level's range can miss finer detail
     const Box3d box = world_box(k);
     if (!cam.may_see(box, width, height)) return NodeUse::empty;
     if (scene_.clip && !box.overlaps(clip_world_)) return NodeUse::empty;

@@ -137,6 +137,30 @@ TEST_F(Gobbetti, VisibilityFeedbackNeverCullsWhatTheImageShows) {
   }
 }
 
+TEST_F(Gobbetti, AnObjectSmallerThanTheCoarseLevelsVoxelsIsStillSeen) {
+  // A sphere of radius 6.4 voxels around the corner of eight finest bricks: averaging moves
+  // every coarse level's range off the isovalue, so the nodes above it look empty by their own
+  // range. Whether a node can be skipped is a question about everything below it.
+  BuildOptions o;
+  o.brick_size = 8;
+  auto corner = make_field_source(make_field("sphere", {{"radius", 0.1}}), {64, 64, 64}, ValueType::f32);
+  build_store(*corner, dir_->file("corner-sphere.store"), o);
+  const Scene sc = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.0}], "quality": {"lod_ratio": 0.25})", 96, "64MiB",
+                         "corner-sphere.store");
+  RenderSession ref(sc, backend_options("reference"));
+  FrameBuffers truth, fb;
+  ref.render(0, truth, kAll);
+  RenderSession g(sc, backend_options("gobbetti"));
+  g.settle(0, kAll);
+  g.render(0, fb, kAll);
+  ASSERT_TRUE(all_finite(fb));
+  int sphere_pixels = 0;
+  for (int y = 0; y < truth.height(); ++y)
+    for (int x = 0; x < truth.width(); ++x) sphere_pixels += std::isfinite(truth.depth(x, y));
+  ASSERT_GT(sphere_pixels, 20);
+  EXPECT_LE(compare_frames(fb, truth, 1.0).coverage_mismatch, uint64_t(sphere_pixels / 50)) << sphere_pixels << " sphere pixels";
+}
+
 TEST_F(Gobbetti, TheImageDoesNotDependOnTheThreadCount) {
   const Scene sc = scene(dvr_scene());
   RenderSession s(sc, backend_options("gobbetti", {{"visibility", 0}}));
