@@ -821,6 +821,9 @@ class GigaVoxelsRenderer final : public Renderer {
       int exit_axis = -1;
       aim_path_along_ray();
       while (t_at < ray.span.t1) {
+        // DVR integrates between samples whatever lies between them: a node a step passes
+        // whole adds nothing, so it descends where the next sample is.
+        if (!iso) t_at = std::max(t_at, t);
         const double entry_fp = footprint(t_at);
         // kd-restart: the descent from the root to the node at t_at whose voxels match the
         // footprint. The nodes it passes through are the last descent's as far as they still
@@ -1013,7 +1016,7 @@ class GigaVoxelsRenderer final : public Renderer {
             }
             s.prev_value = voxel, s.prev_t = t_before, s.have_prev = true;
             prev_node = gigavoxels::kNoAddress;
-            clear_until = t_leave;
+            clear_until = std::min(t_leave, t_face);  // the cube may reach far past this node
             t = t_next;
             continue;
           }
@@ -1121,6 +1124,7 @@ class GigaVoxelsRenderer final : public Renderer {
     bool hidden_crossing(const PathNode& b, const FieldBounds& f, uint32_t prev_node, double t0, double t1, float v0,
                          std::optional<float> v1, Bracket& out) {
       const bool own_v0 = prev_node == b.address;
+      if (!(t0 < t1)) return false;
       if (own_v0 && v1) return search_halves(b, f, t0, t1, v0, *v1, r.search_halvings_, out);
       if (!own_v0)
         for (int a = 0; a < 3; ++a)
@@ -1168,7 +1172,7 @@ class GigaVoxelsRenderer final : public Renderer {
       // Bisected down to 2^-refine voxels of the level sampled, whatever the bracket's length.
       const NodeFrame& frame = blend(lv, lambda).finer->frame;
       const double voxels = (t1 - t0) * double(r.m_) * std::sqrt(frame.dir[0] * frame.dir[0] + frame.dir[1] * frame.dir[1] + frame.dir[2] * frame.dir[2]);
-      const int steps = std::clamp(r.p_.refine + int(std::ceil(std::log2(voxels))), 0, 60);
+      const int steps = voxels > 0 ? int(std::clamp(double(r.p_.refine) + std::ceil(std::log2(voxels)), 0.0, 60.0)) : 0;
       // The first surface crossed between the two samples.
       double best = t1;
       for (const auto& surface : r.scene_.isosurfaces) {
