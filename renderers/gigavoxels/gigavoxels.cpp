@@ -122,7 +122,7 @@ class StoreSource final : public Source {
     // Nodes this scene cannot see, down to the finest level, are constants that contribute
     // nothing (no isovalue in their range, or zero opacity all over it).
     if (n.is_constant() && below.lo == below.hi) c.value = n.constant;
-    else if (!ctx_.subtree_visible(k)) c.value = std::numeric_limits<float>::quiet_NaN();
+    else if (!ctx_.scene().value_range_visible(below.lo, below.hi)) c.value = std::numeric_limits<float>::quiet_NaN();
     else c.kind = NodeContent::brick;
     return c;
   }
@@ -204,8 +204,9 @@ class AmplifiedSource final : public Source {
     const double detail = producer_->detail_bound(a.depth > s ? a.depth : max_depth());
     c.lo = float(lo - detail), c.hi = float(hi + detail);
     const NodeRecord& n = ctx_.nodes().at(k);
+    const RenderContext::ValueSpan& below = ctx_.range_below(k);
     if (!ctx_.scene().value_range_visible(c.lo, c.hi)) c.value = std::numeric_limits<float>::quiet_NaN();
-    else if (a.depth <= s && n.is_constant() && ctx_.range_below(k).lo == ctx_.range_below(k).hi && detail == 0) c.value = n.constant;
+    else if (a.depth <= s && n.is_constant() && below.lo == below.hi && detail == 0) c.value = n.constant;
     else c.kind = NodeContent::brick;
     return c;
   }
@@ -651,13 +652,7 @@ class GigaVoxelsRenderer final : public Renderer {
     bool clear_group(const PathNode& b, double t, double& t_leave, float& voxel) const {
       int g[3];
       const int i = group_at(b, t, g);
-      const int reach = std::max(int(b.group_distances[i]) - 1, 0);  // clear groups on every side
-      t_leave = kInf;
-      for (int a = 0; a < 3; ++a) {
-        if (b.frame.dir[a] == 0) continue;
-        const double face = double((b.frame.dir[a] > 0 ? g[a] + reach + 1 : g[a] - reach) * kCellGroup);
-        t_leave = std::min(t_leave, ((face - 0.5) * r.inv_m_ - b.frame.eye[a]) * b.frame.inv_dir[a]);
-      }
+      t_leave = cube_crossing(b, g, b.group_distances[i], true);
       if (b.group_distances[i] == 0) return false;
       const size_t e = size_t(r.m_) + 2;
       voxel = float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
@@ -673,17 +668,24 @@ class GigaVoxelsRenderer final : public Renderer {
       }
       return (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
     }
+    /// Where the ray leaves (or enters) the cube of groups centred on group g that its distance
+    /// says are clear (just g itself when the distance is 0 or 1).
+    double cube_crossing(const PathNode& b, const int g[3], uint8_t distance, bool leaving) const {
+      const int reach = std::max(int(distance) - 1, 0);  // clear groups on every side
+      double t_cross = leaving ? kInf : -kInf;
+      for (int a = 0; a < 3; ++a) {
+        if (b.frame.dir[a] == 0) continue;
+        const bool upper = (b.frame.dir[a] > 0) == leaving;  // the cube's face the ray crosses there
+        const double face = double((upper ? g[a] + reach + 1 : g[a] - reach) * kCellGroup);
+        const double ta = ((face - 0.5) * r.inv_m_ - b.frame.eye[a]) * b.frame.inv_dir[a];
+        t_cross = leaving ? std::min(t_cross, ta) : std::max(t_cross, ta);
+      }
+      return t_cross;
+    }
     /// Where the ray enters the cube of clear groups around t that clear_group leaps (t is in it).
     double clear_cube_entry(const PathNode& b, double t) const {
       int g[3];
-      const int reach = std::max(int(b.group_distances[group_at(b, t, g)]) - 1, 0);
-      double t_enter = -kInf;
-      for (int a = 0; a < 3; ++a) {
-        if (b.frame.dir[a] == 0) continue;
-        const double face = double((b.frame.dir[a] > 0 ? g[a] - reach : g[a] + reach + 1) * kCellGroup);
-        t_enter = std::max(t_enter, ((face - 0.5) * r.inv_m_ - b.frame.eye[a]) * b.frame.inv_dir[a]);
-      }
-      return t_enter;
+      return cube_crossing(b, g, b.group_distances[group_at(b, t, g)], false);
     }
 
     /// clear_group for what a sample at lambda reads; t_leave is where the answer may change.
@@ -930,12 +932,10 @@ class GigaVoxelsRenderer final : public Renderer {
             s.prev_value = v, s.prev_t = t_face, s.have_prev = true;
             prev_node = gigavoxels::kNoAddress;
           } else {
-            // From the last step's end: the step into this node integrated up to it.
-            const double from = std::max(t, t_at);
             Vec3f col;
             float a;
-            r.preintegrated_.segment(float(v), float(v), (t_end - from) * unit_per_t / r.finest_voxel_unit_, col, a);
-            composite(s, px, col, a, from, Vec3d(0.0), ray);
+            r.preintegrated_.segment(float(v), float(v), (t_end - t_at) * unit_per_t / r.finest_voxel_unit_, col, a);
+            composite(s, px, col, a, t_at, Vec3d(0.0), ray);
             if (s.alpha >= stop) break;
           }
           t = t_at = t_exit;

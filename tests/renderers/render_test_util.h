@@ -42,6 +42,14 @@ inline bool all_finite(const FrameBuffers& fb) {
   return true;
 }
 
+/// Pixels where the frame hit something (a finite depth).
+inline int hit_pixels(const FrameBuffers& fb) {
+  int hits = 0;
+  for (int y = 0; y < fb.height(); ++y)
+    for (int x = 0; x < fb.width(); ++x) hits += std::isfinite(fb.depth(x, y));
+  return hits;
+}
+
 /// A back end's frame at the finest level against the reference, beside raymarch's at the same
 /// step (crossings refined 20 times): colour RMSE below max_rmse and at most 1.2x raymarch's
 /// plus 1e-3, coverage mismatch under 0.5%, and for isosurfaces depth p99 under 0.05 voxel and

@@ -34,6 +34,7 @@ using testing::all_finite;
 using testing::backend_options;
 using testing::dvr_scene;
 using testing::expect_as_good_as_raymarch;
+using testing::hit_pixels;
 using testing::iso_scene;
 
 using gigavoxels::kNoAddress;
@@ -408,9 +409,7 @@ TEST_F(GigaVoxels, AStepLongerThanANodeStillEntersAndSearchesEveryNodeItCrosses)
   RenderSession ref(sc, backend_options("reference"));
   FrameBuffers truth;
   ref.render(0, truth, kAll);
-  int sphere_pixels = 0;
-  for (int y = 0; y < truth.height(); ++y)
-    for (int x = 0; x < truth.width(); ++x) sphere_pixels += std::isfinite(truth.depth(x, y));
+  const int sphere_pixels = hit_pixels(truth);
   ASSERT_GT(sphere_pixels, 500);
   for (double step : {8.0, 3.0}) {
     RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}, {"step", step}}));
@@ -488,10 +487,7 @@ TEST_F(GigaVoxels, ArityThreeRendersTheInstancedMengerSpongeFromOneBrick) {
   EXPECT_TRUE(g.converged());
   EXPECT_GT(st.backend_value("subdivisions"), 0);
   EXPECT_EQ(st.backend_value("bricks_in_use"), 1);
-  int hits = 0;
-  for (int y = 0; y < 64; ++y)
-    for (int x = 0; x < 64; ++x) hits += std::isfinite(fb.depth(x, y));
-  EXPECT_GT(hits, 500);
+  EXPECT_GT(hit_pixels(fb), 500);
   // Through the middle of a face lies the central tunnel, empty at every depth: a ray along
   // the x axis through the centre of the box sees nothing.
   const Scene through = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "values": "stored")", 8,
@@ -598,10 +594,7 @@ TEST_F(GigaVoxelsZoom, ADeepZoomIntoTheSpongeSeesTheSameImageAsAShallowOne) {
     const FrameBuffers deep = render(c.corner, eye, target, &deep_stats);
     const FrameBuffers shallow = render(c.corner, eye * grow, target * grow);
     ASSERT_TRUE(all_finite(deep));
-    int hits = 0;
-    for (int y = 0; y < 48; ++y)
-      for (int x = 0; x < 48; ++x) hits += std::isfinite(shallow.depth(x, y));
-    EXPECT_GT(hits, 48 * 48 / 2) << "the view must be filled by the sponge";
+    EXPECT_GT(hit_pixels(shallow), 48 * 48 / 2) << "the view must be filled by the sponge";
     const ImageError e = compare_frames(deep, shallow, 1.0);
     EXPECT_LT(e.rmse, 1e-5) << "corner " << c.corner << ", depth " << c.depth << ": " << e.to_json();
     EXPECT_EQ(e.coverage_mismatch, 0u) << "corner " << c.corner << ", depth " << c.depth << ": " << e.to_json();

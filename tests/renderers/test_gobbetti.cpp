@@ -24,6 +24,7 @@ using testing::all_finite;
 using testing::backend_options;
 using testing::dvr_scene;
 using testing::expect_as_good_as_raymarch;
+using testing::hit_pixels;
 using testing::iso_scene;
 
 /// Marschner-Lobb 64^3 f32 in 8^3 bricks (4 levels): detail everywhere, no constant bricks.
@@ -154,9 +155,7 @@ TEST_F(Gobbetti, AnObjectSmallerThanTheCoarseLevelsVoxelsIsStillSeen) {
   g.settle(0, kAll);
   g.render(0, fb, kAll);
   ASSERT_TRUE(all_finite(fb));
-  int sphere_pixels = 0;
-  for (int y = 0; y < truth.height(); ++y)
-    for (int x = 0; x < truth.width(); ++x) sphere_pixels += std::isfinite(truth.depth(x, y));
+  const int sphere_pixels = hit_pixels(truth);
   ASSERT_GT(sphere_pixels, 20);
   EXPECT_LE(compare_frames(fb, truth, 1.0).coverage_mismatch, uint64_t(sphere_pixels / 50)) << sphere_pixels << " sphere pixels";
 }
