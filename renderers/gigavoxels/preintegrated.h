@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "renderers/common/transfer_function.h"
@@ -25,7 +26,10 @@ class PreintegratedTf {
     const float hi = float(pts.back().value);
     const int n = hi > lo_ ? size : 1;
     scale_ = n > 1 ? float(n - 1) / (hi - lo_) : 0.0f;
-    const double dv = n > 1 ? double(hi - lo_) / double(n - 1) : 0.0;
+    // Entries at the points' own values (lo_ rounded to float would move the first entry off
+    // a zero-opacity point).
+    const double lo = pts.front().value, dv = n > 1 ? (pts.back().value - lo) / double(n - 1) : 0.0;
+    dv_ = dv;
     tau_.assign(size_t(n), 0.0);
     ctau_.assign(size_t(n), Vec3d(0.0));
     point_.resize(size_t(n));
@@ -34,7 +38,7 @@ class PreintegratedTf {
     for (int i = 0; i < n; ++i) {
       Vec3f c;
       float a;
-      tf.eval(lo_ + double(i) * dv, c, a);
+      tf.eval(lo + double(i) * dv, c, a);
       const double t = -std::log(std::max(1e-12, 1.0 - std::min(double(a), 1.0 - 1e-12)));
       point_[size_t(i)] = {Vec3d(c), t};
       if (i > 0) {  // trapezoids over the value axis
@@ -44,11 +48,19 @@ class PreintegratedTf {
       prev_tau = t;
       prev_ctau = Vec3d(c) * t;
     }
+    // Up to the entry before the first with any extinction, segments are transparent.
+    size_t first = 0;
+    while (first < point_.size() && point_[first].tau == 0) ++first;
+    clear_up_to_ = first == 0 ? -kInfinity : first == point_.size() ? kInfinity : lo_ + float(first - 1) / (n > 1 ? scale_ : 1.0f);
   }
 
   /// @brief The segment's opacity and colour (not premultiplied) for a value going linearly
   /// from front to back over length_voxels finest voxels.
   void segment(float front, float back, double length_voxels, Vec3f& color, float& alpha) const {
+    if (std::max(front, back) <= clear_up_to_) {  // most of a sparse volume: no table, no exp
+      color = Vec3f(0.0f), alpha = 0;
+      return;
+    }
     const double xf = position(front), xb = position(back);
     double tau;  // mean extinction per voxel over the segment
     Vec3d ctau;
@@ -57,9 +69,10 @@ class PreintegratedTf {
       tau = e.tau;
       ctau = e.color * e.tau;
     } else {
-      const double inv = 1.0 / ((xb - xf) / double(scale_));
-      tau = (integral(tau_, xb) - integral(tau_, xf)) * inv;
-      ctau = (integral(ctau_, xb) - integral(ctau_, xf)) * inv;
+      const Integral f = integral(xf), b = integral(xb);
+      const double inv = 1.0 / ((xb - xf) * dv_);
+      tau = (b.tau - f.tau) * inv;
+      ctau = (b.ctau - f.ctau) * inv;
     }
     alpha = float(1.0 - std::exp(-std::max(0.0, tau) * length_voxels));
     color = tau > 1e-12 ? Vec3f(ctau / tau) : Vec3f(0.0f);
@@ -70,24 +83,40 @@ class PreintegratedTf {
     Vec3d color;
     double tau;
   };
+  /// Table position of value v, not clamped: a segment reaching past the points integrates
+  /// the end points' constant extinction there over its whole length. NaN becomes 0.
   double position(float v) const {
-    const double last = double(tau_.size() - 1);
-    const double x = double(v - lo_) * double(scale_);
-    return x > 0 ? (x < last ? x : last) : 0.0;  // NaN becomes 0
+    const double x = (double(v) - double(lo_)) * double(scale_);
+    return x == x ? x : 0.0;
   }
-  template <typename T>
-  static T integral(const std::vector<T>& table, double x) {
-    const size_t i = std::min(size_t(x), table.size() - 1), j = std::min(i + 1, table.size() - 1);
+  struct Integral {
+    double tau;
+    Vec3d ctau;
+  };
+  /// The running integrals at table position x, continued past either end with that end's
+  /// constant extinction and colour.
+  Integral integral(double x) const {
+    const size_t last = tau_.size() - 1;
+    if (x <= 0 || x >= double(last)) {
+      const size_t i = x <= 0 ? 0 : last;
+      const double d = (x - double(i)) * dv_;
+      return {tau_[i] + point_[i].tau * d, ctau_[i] + point_[i].color * (point_[i].tau * d)};
+    }
+    const size_t i = size_t(x);
     const double f = x - double(i);
-    return table[i] + (table[j] - table[i]) * f;
+    return {tau_[i] + (tau_[i + 1] - tau_[i]) * f, ctau_[i] + (ctau_[i + 1] - ctau_[i]) * f};
   }
   Entry point_at(double x) const {
+    x = std::clamp(x, 0.0, double(point_.size() - 1));
     const size_t i = std::min(size_t(x), point_.size() - 1), j = std::min(i + 1, point_.size() - 1);
     const double f = x - double(i);
     return {point_[i].color + (point_[j].color - point_[i].color) * f, point_[i].tau + (point_[j].tau - point_[i].tau) * f};
   }
 
+  static constexpr float kInfinity = std::numeric_limits<float>::infinity();
   float lo_ = 0, scale_ = 0;
+  double dv_ = 0;  // value per table entry
+  float clear_up_to_ = -kInfinity;  // a segment whose values all lie at or below this is transparent
   std::vector<double> tau_;   // integral of extinction over [lo, value]
   std::vector<Vec3d> ctau_;   // integral of colour * extinction
   std::vector<Entry> point_;

@@ -24,6 +24,7 @@
 #include "renderers/gigavoxels/cell_groups.h"
 #include "renderers/gigavoxels/field_bounds.h"
 #include "renderers/gigavoxels/node_tree.h"
+#include "renderers/gigavoxels/preintegrated.h"
 #include "renderers/render_test_util.h"
 #include "test_util.h"
 
@@ -148,6 +149,48 @@ TEST(GigaVoxelsNodeTree, UsingANodeKeepsTheCoarserBricksRaysBlendWith) {
   EXPECT_TRUE(tree.node(a + 5).has_brick());
   EXPECT_EQ(tree.node(a + 5).brick(), parent_brick);
   EXPECT_EQ(tree.node(b + 2).brick(), child_brick);
+}
+
+TEST(GigaVoxelsPreintegratedTf, SegmentsAreTheEmissionAbsorptionIntegralOfALinearRamp) {
+  // Against quadrature of the ramp's extinction tau(v) = -ln(1 - opacity(v)) per voxel and its
+  // extinction-weighted colour, over random segments: both orders, equal ends, ends outside the
+  // points, and segments wholly in the transparent values below the first opaque point, which
+  // are exactly transparent without a table lookup.
+  const TransferFunction tf({{0.2, {0.1f, 0.2f, 0.9f}, 0.0f}, {0.5, {0.2f, 0.9f, 0.3f}, 0.4f},
+                             {0.8, {0.9f, 0.8f, 0.1f}, 0.1f}, {1.0, {1.0f, 0.3f, 0.2f}, 0.7f}});
+  const gigavoxels::PreintegratedTf pre(tf);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> value(-0.1, 1.1), length(0.05, 4.0);
+  int transparent = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    float front = float(value(rng)), back = trial % 10 == 0 ? front : float(value(rng));
+    if (trial % 7 == 0) front = float(0.2 * value(rng)), back = float(0.2 * value(rng));  // below the first opaque value
+    const double len = length(rng);
+    const int n = 20000;
+    double tau = 0;
+    Vec3d ctau(0.0);
+    for (int k = 0; k < n; ++k) {
+      Vec3f c;
+      float a;
+      tf.eval(double(front) + (double(back) - double(front)) * (k + 0.5) / n, c, a);
+      const double t = -std::log(1.0 - double(a));
+      tau += t / n;
+      ctau += Vec3d(c) * (t / n);
+    }
+    Vec3f color;
+    float alpha;
+    pre.segment(front, back, len, color, alpha);
+    const std::string what = fmt::format("trial {}: {} to {} over {} voxels", trial, front, back, len);
+    ASSERT_NEAR(alpha, 1.0 - std::exp(-tau * len), 2e-4) << what;
+    if (tau == 0) {
+      ++transparent;
+      ASSERT_EQ(alpha, 0.0f) << what;
+      continue;
+    }
+    if (tau < 1e-3) continue;  // the colour of next to nothing is ill-conditioned
+    for (int c = 0; c < 3; ++c) ASSERT_NEAR(color[c], ctau[c] / tau, 2e-3) << what << " channel " << c;
+  }
+  EXPECT_GT(transparent, 40);  // the early return is exercised
 }
 
 /// Marschner-Lobb and a sphere's distance, 64^3 f32 in 8^3 bricks (4 levels).
