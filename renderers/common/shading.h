@@ -51,22 +51,38 @@ class ShadingModel {
     return Vec3d(0.0);
   }
 
+  /// @brief The light a surface point receives: shade() is base * (ambient + diffuse *
+  /// `diffuse`) * light colour + light colour * specular * `specular`, so that lighting
+  /// computed at two points can be averaged before it is applied (a ray segment shaded from
+  /// both of its ends).
+  struct Lighting {
+    float diffuse = 0, specular = 0;
+    Lighting mean(const Lighting& o) const { return {0.5f * (diffuse + o.diffuse), 0.5f * (specular + o.specular)}; }
+  };
+  /// @param n unit normal facing the viewer; `view` unit vector towards the eye, `light` unit
+  /// vector towards the light.
+  Lighting lighting(const Vec3d& n, const Vec3d& view, const Vec3d& light, bool shadowed) const {
+    Lighting l;
+    if (shadowed) return l;
+    l.diffuse = float(std::fabs(dot(n, light)));
+    const Vec3d h = normalize(light + view);
+    const double nh = std::fabs(dot(n, h));
+    if (nh > 0) l.specular = float(shininess_power_ ? pow_uint(nh, shininess_power_) : std::pow(nh, double(s_.shininess)));
+    return l;
+  }
+  Vec3f apply(const Vec3f& base, const Lighting& l) const {
+    if (!lit()) return base;
+    const Vec3f lc = s_.light_color;
+    Vec3f out = base * (s_.ambient + s_.diffuse * l.diffuse) * lc + lc * (s_.specular * l.specular);
+    out.x = std::min(out.x, 1.0f), out.y = std::min(out.y, 1.0f), out.z = std::min(out.z, 1.0f);
+    return out;
+  }
+
   /// @brief Shaded colour of a surface point of colour `base` with unit normal n facing the
   /// viewer, unit vector `view` towards the eye, unit `light` towards the light. Two-sided.
   Vec3f shade(const Vec3f& base, const Vec3d& n, const Vec3d& view, const Vec3d& light, bool shadowed) const {
     if (!lit()) return base;
-    float diffuse = 0, specular = 0;
-    if (!shadowed) {
-      const double nl = std::fabs(dot(n, light));
-      diffuse = float(nl);
-      const Vec3d h = normalize(light + view);
-      const double nh = std::fabs(dot(n, h));
-      if (nh > 0) specular = float(shininess_power_ ? pow_uint(nh, shininess_power_) : std::pow(nh, double(s_.shininess)));
-    }
-    const Vec3f lc = s_.light_color;
-    Vec3f out = base * (s_.ambient + s_.diffuse * diffuse) * lc + lc * (s_.specular * specular);
-    out.x = std::min(out.x, 1.0f), out.y = std::min(out.y, 1.0f), out.z = std::min(out.z, 1.0f);
-    return out;
+    return apply(base, lighting(n, view, light, shadowed));
   }
 
  private:

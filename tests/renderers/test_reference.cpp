@@ -29,6 +29,7 @@
 #include "renderers/common/grid_walk.h"
 #include "renderers/common/metrics.h"
 #include "renderers/common/render.h"
+#include "renderers/common/shading.h"
 #include "test_util.h"
 
 namespace brickyard {
@@ -757,6 +758,31 @@ TEST(RenderThreads, FramesAreBitIdenticalWithOneAndTwoThreads) {
       for (int i = 0; i < 48 * 48; ++i) drawn += frames[0].color.data()[i].a > 0;
       EXPECT_GT(drawn, 100);
     }
+}
+
+TEST(ShadingModel, LightingIsAveragedBeforeItIsApplied) {
+  // shade() is apply(lighting()); apply is affine in the lighting, so the mean of two points'
+  // lighting, applied, is the mean of their shaded colours (below the clamp at 1), which is
+  // how a ray segment is shaded from both its ends. Shadowed: the ambient term alone.
+  Shading sh;
+  const VolumeGeometry geo;
+  const ShadingModel m(sh, geo);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::uniform_real_distribution<float> unit(0.0f, 0.5f);
+  const auto direction = [&] { return normalize(Vec3d(normal(rng), normal(rng), normal(rng))); };
+  for (int trial = 0; trial < 200; ++trial) {
+    const Vec3d n0 = direction(), n1 = direction(), view = direction(), light = trial % 2 ? view : direction();
+    const Vec3f base(unit(rng), unit(rng), unit(rng));
+    const ShadingModel::Lighting l0 = m.lighting(n0, view, light, false), l1 = m.lighting(n1, view, light, false);
+    const Vec3f s0 = m.shade(base, n0, view, light, false), s1 = m.shade(base, n1, view, light, false);
+    const Vec3f applied = m.apply(base, l0), mean = m.apply(base, l0.mean(l1));
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_EQ(applied[c], s0[c]) << trial;
+      ASSERT_NEAR(mean[c], 0.5f * (s0[c] + s1[c]), 1e-6f) << trial;
+      ASSERT_FLOAT_EQ(m.shade(base, n0, view, light, true)[c], base[c] * sh.ambient) << trial;
+    }
+  }
 }
 
 }  // namespace
