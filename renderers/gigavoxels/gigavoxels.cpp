@@ -543,6 +543,12 @@ class GigaVoxelsRenderer final : public Renderer {
     bool have_prev_gradient = false, have_prev_lighting = false;
     Vec3d prev_gradient{0.0};
     ShadingModel::Lighting prev_lighting;
+
+    /// The next segment starts at `at` with `value`, where no gradient was taken.
+    void start_segment(float value, double at) {
+      prev_value = value, prev_t = at, have_prev = true;
+      have_prev_gradient = have_prev_lighting = false;
+    }
   };
 
   /// A node as the ray sees it, in the node's own coordinates ([0, 1]^3 across the node): the
@@ -685,6 +691,13 @@ class GigaVoxelsRenderer final : public Renderer {
       }
       return t_cross;
     }
+    /// Where the ray enters a node, in its frame (before the ray's start when it starts inside).
+    static double node_entry(const NodeFrame& frame) {
+      double t_entry = -kInf;
+      for (int a = 0; a < 3; ++a)
+        if (frame.dir[a] != 0) t_entry = std::max(t_entry, ((frame.dir[a] > 0 ? 0.0 : 1.0) - frame.eye[a]) * frame.inv_dir[a]);
+      return t_entry;
+    }
     /// Where the ray enters the cube of clear groups around t that clear_group leaps (t is in it).
     double clear_cube_entry(const PathNode& b, double t) const {
       int g[3];
@@ -694,8 +707,8 @@ class GigaVoxelsRenderer final : public Renderer {
     /// clear_group for what a sample at lambda reads; t_leave is where the answer may change.
     /// Two blended levels are clear together when every blend of theirs is: iso, both clear on
     /// the same side of every isovalue; DVR, both in the same interval of values the transfer
-    /// function hides (a clear group's values all lie in one such interval, so the interval
-    /// between their voxels is hidden exactly when it holds both).
+    /// function hides (a clear group's values all lie in one such interval; when the interval
+    /// between their voxels is hidden, both lie in the same one).
     bool clear(const Blend& bl, double t, bool iso, double& t_leave, float& voxel) const {
       const bool finer_clear = clear_group(*bl.finer, t, t_leave, voxel);
       if (!bl.coarse || !finer_clear) return finer_clear;
@@ -717,7 +730,7 @@ class GigaVoxelsRenderer final : public Renderer {
         if (s.status == RayState::fresh) {
           s.t = s.t_sample = ray.span.t0;
           // A procedural volume is empty outside its box: entering a solid region is a surface.
-          if (r.outside_value_) s.prev_value = *r.outside_value_, s.prev_t = s.t, s.have_prev = true;
+          if (r.outside_value_) s.start_segment(*r.outside_value_, s.t);
         }
         march(ray, s, rec, px);
       } else {
@@ -816,6 +829,7 @@ class GigaVoxelsRenderer final : public Renderer {
       }
       scale_eye();
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
+      const auto to_voxels = [&](double dt) { return dt * unit_per_t / r.finest_voxel_unit_; };  // opacity's unit
       const double stop = r.scene_.quality.termination_opacity;
       const int n = r.n_;
       // Descents and samples advance apart: a step may reach past the next node, which is still
@@ -939,7 +953,7 @@ class GigaVoxelsRenderer final : public Renderer {
               face_axis = entry_axis;
               break;
             }
-            s.prev_value = v, s.prev_t = t_face, s.have_prev = true;
+            s.start_segment(v, t_face);
             prev_node = gigavoxels::kNoAddress;
           } else {
             // DVR descends where its next sample is, which may lie inside the node: the ray
@@ -948,22 +962,16 @@ class GigaVoxelsRenderer final : public Renderer {
             // value at its exit starts the next segment (each part of the ray counts once).
             double t_from = t_at;
             if (s.have_prev && s.prev_t < t_at) {
-              double t_entry = -kInf;
-              for (int a = 0; a < 3; ++a)
-                if (frame.dir[a] != 0) t_entry = std::max(t_entry, ((frame.dir[a] > 0 ? 0.0 : 1.0) - frame.eye[a]) * frame.inv_dir[a]);
-              t_from = std::clamp(t_entry, s.prev_t, t_at);
-              integrate(s, px, v, t_from, (t_from - s.prev_t) * unit_per_t / r.finest_voxel_unit_, Vec3d(0.0), ray);
+              t_from = std::clamp(node_entry(frame), s.prev_t, t_at);
+              integrate(s, px, v, t_from, to_voxels(t_from - s.prev_t), Vec3d(0.0), ray);
               if (s.alpha >= stop) break;
             }
             Vec3f col;
             float a;
-            r.preintegrated_.segment(v, v, (t_end - t_from) * unit_per_t / r.finest_voxel_unit_, col, a);
-            Vec3d normal;
-            const ShadingModel::Lighting light = lighting_at(t_from, Vec3d(0.0), ray, normal);
-            composite(s, px, col, a, t_from, light, normal);
+            r.preintegrated_.segment(v, v, to_voxels(t_end - t_from), col, a);
+            composite(s, px, col, a, t_from, ShadingModel::Lighting{}, Vec3d(0.0));  // no gradient: ambient light
             if (s.alpha >= stop) break;
-            s.prev_value = v, s.prev_t = t_end, s.have_prev = true;
-            s.have_prev_gradient = s.have_prev_lighting = false;
+            s.start_segment(v, t_end);
           }
           t = t_at = t_exit;
           continue;
@@ -985,12 +993,12 @@ class GigaVoxelsRenderer final : public Renderer {
         const double finest_dt = r.step_ * fine_voxel / unit_per_t;
         t = std::max(t, t_at);
         // One more sample at the node's exit. Iso: so that a crossing in the last part-step is
-        // bracketed even when the next node is empty. DVR, where the ray leaves the volume: so
-        // that the last part-step is integrated (on Marschner-Lobb 64^3 at step 1, leaving it
-        // out doubled the error against the reference).
+        // bracketed even when the next node is empty. DVR: so that the part-step to the exit is
+        // integrated even when the next node takes no samples (hidden, or past the ray's end:
+        // on Marschner-Lobb 64^3 at step 1, leaving that out doubled the error).
         for (bool last = false; !last;) {
           if (t >= t_end) {
-            if (!(iso || t_face >= ray.span.t1) || (s.have_prev && s.prev_t >= t_face)) break;
+            if ((!iso && !s.have_prev) || (s.have_prev && s.prev_t >= t_face)) break;
             t = t_face;
             last = true;
           }
@@ -1004,8 +1012,9 @@ class GigaVoxelsRenderer final : public Renderer {
             bl = blend(lv, lam);
           }
           // A clear cell group (nothing visible in it), and the clear groups around it, are
-          // leapt to the first sample position past them: the samples taken are the ones
-          // marching every step would take.
+          // leapt to the first sample position past them: where the step is the same all along
+          // the node (one level), the samples taken are the ones marching every step would take;
+          // where it follows the footprint, later samples move (another sampling, as accurate).
           double t_leave = kInf, t_next = 0, t_before = 0;
           float voxel;
           bool leap = false;
@@ -1043,7 +1052,7 @@ class GigaVoxelsRenderer final : public Renderer {
               finished = true;
               break;
             }
-            s.prev_value = voxel, s.prev_t = t_before, s.have_prev = true;
+            s.start_segment(voxel, t_before);
             prev_node = gigavoxels::kNoAddress;
             clear_until = std::min(t_leave, t_face);  // the cube may reach far past this node
             t = t_next;
@@ -1051,8 +1060,7 @@ class GigaVoxelsRenderer final : public Renderer {
           }
           if (leap && !s.have_prev) {  // DVR: the group adds nothing; its last value starts the next segment
             ++counters.samples;
-            s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before, s.have_prev = true;
-            s.have_prev_gradient = s.have_prev_lighting = false;
+            s.start_segment(sample(bl, t_before, nullptr), t_before);
             t = t_next;
             continue;
           }
@@ -1075,7 +1083,7 @@ class GigaVoxelsRenderer final : public Renderer {
             const float v = sample(bl, t, gradients ? &g : nullptr);
             bool lit_here = false;
             if (s.have_prev) {
-              lit_here = integrate(s, px, v, t, std::min(dt, t - s.prev_t) * unit_per_t / r.finest_voxel_unit_, g, ray);
+              lit_here = integrate(s, px, v, t, to_voxels(t - s.prev_t), g, ray);
               if (s.alpha >= stop) {
                 finished = true;
                 break;
@@ -1085,8 +1093,7 @@ class GigaVoxelsRenderer final : public Renderer {
             s.prev_gradient = g, s.have_prev_gradient = gradients, s.have_prev_lighting = lit_here;
             if (leap) {  // this sample closed the segment into the group; its last value starts the next
               ++counters.samples;
-              s.prev_value = sample(bl, t_before, nullptr), s.prev_t = t_before;
-              s.have_prev_gradient = s.have_prev_lighting = false;
+              s.start_segment(sample(bl, t_before, nullptr), t_before);
               t = t_next;
               continue;
             }
@@ -1241,8 +1248,8 @@ class GigaVoxelsRenderer final : public Renderer {
       px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
     }
 
-    /// The lighting at t for the field's gradient there, and the normal it used (zero where
-    /// the gradient is: the ambient term alone).
+    /// The lighting at t for the field's gradient there, and the normal it used (a zero
+    /// gradient gives no normal, and so the ambient term alone).
     ShadingModel::Lighting lighting_at(double t, const Vec3d& gradient, const PrimaryRay& ray, Vec3d& n) {
       n = Vec3d(0.0);
       if (gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0)) {
@@ -1254,7 +1261,7 @@ class GigaVoxelsRenderer final : public Renderer {
       return r.shading_.lighting(n, -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);
     }
     /// DVR: integrates the segment from the previous sample to t, where the value is v and the
-    /// gradient g (zero: none), `voxels` finest voxels long. Shaded with the mean of its ends'
+    /// gradient g (zero: ambient light alone at that end), `voxels` finest voxels long. Shaded with the mean of its ends'
     /// lighting (the back end's alone is half a segment off; the lighting of a mean gradient is
     /// not the mean lighting where normals turn). Returns whether the segment showed anything,
     /// and so whether t's lighting was computed (s.prev_lighting) for the next segment.
@@ -1270,7 +1277,8 @@ class GigaVoxelsRenderer final : public Renderer {
       s.prev_lighting = back;
       return true;
     }
-    /// Composites a segment of colour c (not premultiplied) and opacity a that ends at t.
+    /// Composites a segment of colour c (not premultiplied) and opacity a; t is where it
+    /// counts for the depth output.
     void composite(RayState& s, PixelResult& px, Vec3f c, double a, double t, const ShadingModel::Lighting& light, const Vec3d& n) {
       c = r.shading_.apply(c, light);
       s.accum += Vec3d(c) * ((1 - s.alpha) * a);

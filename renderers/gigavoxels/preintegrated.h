@@ -22,13 +22,15 @@ class PreintegratedTf {
   /// @param tf opacities are per finest voxel of length (as every back end reads them).
   explicit PreintegratedTf(const TransferFunction& tf, int size = 4096) {
     const auto& pts = tf.points();
-    lo_ = float(pts.front().value);
-    const float hi = float(pts.back().value);
-    const int n = hi > lo_ ? size : 1;
-    scale_ = n > 1 ? float(n - 1) / (hi - lo_) : 0.0f;
-    // Entries at the points' own values (lo_ rounded to float would move the first entry off
-    // a zero-opacity point).
-    const double lo = pts.front().value, dv = n > 1 ? (pts.back().value - lo) / double(n - 1) : 0.0;
+    // Entries at the points' own values, in double (rounded to float, the first entry would
+    // move off a zero-opacity point). Points that all share one value make a step there: the
+    // table spans a sliver above it, so that values above take the last point.
+    lo_ = pts.front().value;
+    double hi = pts.back().value;
+    if (!(hi > lo_)) hi = lo_ + std::max(std::abs(lo_), 1.0) * 1e-9;
+    const int n = std::max(size, 2);
+    scale_ = double(n - 1) / (hi - lo_);
+    const double dv = (hi - lo_) / double(n - 1);
     dv_ = dv;
     tau_.assign(size_t(n), 0.0);
     ctau_.assign(size_t(n), Vec3d(0.0));
@@ -38,7 +40,7 @@ class PreintegratedTf {
     for (int i = 0; i < n; ++i) {
       Vec3f c;
       float a;
-      tf.eval(lo + double(i) * dv, c, a);
+      tf.eval(lo_ + double(i) * dv, c, a);
       const double t = -std::log(std::max(1e-12, 1.0 - std::min(double(a), 1.0 - 1e-12)));
       point_[size_t(i)] = {Vec3d(c), t};
       if (i > 0) {  // trapezoids over the value axis
@@ -51,13 +53,13 @@ class PreintegratedTf {
     // Up to the entry before the first with any extinction, segments are transparent.
     size_t first = 0;
     while (first < point_.size() && point_[first].tau == 0) ++first;
-    clear_up_to_ = first == 0 ? -kInfinity : first == point_.size() ? kInfinity : lo_ + float(first - 1) / (n > 1 ? scale_ : 1.0f);
+    clear_up_to_ = first == 0 ? -kInfinity : first == point_.size() ? kInfinity : lo_ + double(first - 1) * dv;
   }
 
   /// @brief The segment's opacity and colour (not premultiplied) for a value going linearly
   /// from front to back over length_voxels finest voxels.
   void segment(float front, float back, double length_voxels, Vec3f& color, float& alpha) const {
-    if (std::max(front, back) <= clear_up_to_) {  // most of a sparse volume: no table, no exp
+    if (double(std::max(front, back)) <= clear_up_to_) {  // most of a sparse volume: no table, no exp
       color = Vec3f(0.0f), alpha = 0;
       return;
     }
@@ -86,7 +88,8 @@ class PreintegratedTf {
   /// Table position of value v, not clamped: a segment reaching past the points integrates
   /// the end points' constant extinction there over its whole length. NaN becomes 0.
   double position(float v) const {
-    const double x = (double(v) - double(lo_)) * double(scale_);
+    // An infinite value is the largest finite one: the extinction there is the end's all the same.
+    const double x = (double(std::clamp(v, -kFloatMax, kFloatMax)) - lo_) * scale_;
     return x == x ? x : 0.0;
   }
   struct Integral {
@@ -113,10 +116,11 @@ class PreintegratedTf {
     return {point_[i].color + (point_[j].color - point_[i].color) * f, point_[i].tau + (point_[j].tau - point_[i].tau) * f};
   }
 
-  static constexpr float kInfinity = std::numeric_limits<float>::infinity();
-  float lo_ = 0, scale_ = 0;
+  static constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  static constexpr float kFloatMax = std::numeric_limits<float>::max();
+  double lo_ = 0, scale_ = 0;
   double dv_ = 0;  // value per table entry
-  float clear_up_to_ = -kInfinity;  // a segment whose values all lie at or below this is transparent
+  double clear_up_to_ = -kInfinity;  // a segment whose values all lie at or below this is transparent
   std::vector<double> tau_;   // integral of extinction over [lo, value]
   std::vector<Vec3d> ctau_;   // integral of colour * extinction
   std::vector<Entry> point_;
