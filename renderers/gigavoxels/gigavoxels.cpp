@@ -1248,31 +1248,33 @@ class GigaVoxelsRenderer final : public Renderer {
       px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
     }
 
-    /// The lighting at t for the field's gradient there, and the normal it used (a zero
-    /// gradient gives no normal, and so the ambient term alone).
-    ShadingModel::Lighting lighting_at(double t, const Vec3d& gradient, const PrimaryRay& ray, Vec3d& n) {
-      n = Vec3d(0.0);
+    /// The lighting at t for the field's gradient there, and the normal it used, if asked for
+    /// (a zero gradient gives no normal, and so the ambient term alone).
+    ShadingModel::Lighting lighting_at(double t, const Vec3d& gradient, const PrimaryRay& ray, Vec3d* normal = nullptr) {
+      Vec3d n(0.0);
       if (gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0)) {
         ++counters.gradients;
         n = facing_normal(gradient / (r.geo_.spacing * r.extent_), ray.world.dir);
       }
+      if (normal) *normal = n;
       if (!r.shading_.lit()) return {};
       double light_distance;
       return r.shading_.lighting(n, -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);
     }
     /// DVR: integrates the segment from the previous sample to t, where the value is v and the
-    /// gradient g (zero: ambient light alone at that end), `voxels` finest voxels long. Shaded with the mean of its ends'
-    /// lighting (the back end's alone is half a segment off; the lighting of a mean gradient is
-    /// not the mean lighting where normals turn). Returns whether the segment showed anything,
-    /// and so whether t's lighting was computed (s.prev_lighting) for the next segment.
+    /// gradient g (zero: ambient light alone at that end), `voxels` finest voxels long. Shaded
+    /// with the mean of its ends' lighting (the back end's alone is half a segment off; the
+    /// lighting of a mean gradient is not the mean lighting where normals turn). Returns whether
+    /// the segment showed anything, and so whether t's lighting was computed (s.prev_lighting)
+    /// for the next segment.
     bool integrate(RayState& s, PixelResult& px, float v, double t, double voxels, const Vec3d& g, const PrimaryRay& ray) {
       Vec3f col;
       float a;
       r.preintegrated_.segment(s.prev_value, v, voxels, col, a);
       if (!(a > 0)) return false;
-      Vec3d normal, unused;
-      const ShadingModel::Lighting back = lighting_at(t, g, ray, normal);
-      if (!s.have_prev_lighting && s.have_prev_gradient) s.prev_lighting = lighting_at(s.prev_t, s.prev_gradient, ray, unused);
+      Vec3d normal;
+      const ShadingModel::Lighting back = lighting_at(t, g, ray, &normal);
+      if (!s.have_prev_lighting && s.have_prev_gradient) s.prev_lighting = lighting_at(s.prev_t, s.prev_gradient, ray);
       composite(s, px, col, a, t, s.have_prev_gradient ? back.mean(s.prev_lighting) : back, normal);
       s.prev_lighting = back;
       return true;

@@ -30,30 +30,26 @@ class PreintegratedTf {
     if (!(hi > lo_)) hi = lo_ + std::max(std::abs(lo_), 1.0) * 1e-9;
     const int n = std::max(size, 2);
     scale_ = double(n - 1) / (hi - lo_);
-    const double dv = (hi - lo_) / double(n - 1);
-    dv_ = dv;
+    dv_ = (hi - lo_) / double(n - 1);
     tau_.assign(size_t(n), 0.0);
     ctau_.assign(size_t(n), Vec3d(0.0));
     point_.resize(size_t(n));
-    double prev_tau = 0;
-    Vec3d prev_ctau(0.0);
-    for (int i = 0; i < n; ++i) {
+    for (size_t i = 0; i < size_t(n); ++i) {
       Vec3f c;
       float a;
-      tf.eval(lo_ + double(i) * dv, c, a);
+      tf.eval(lo_ + double(i) * dv_, c, a);
       const double t = -std::log(std::max(1e-12, 1.0 - std::min(double(a), 1.0 - 1e-12)));
-      point_[size_t(i)] = {Vec3d(c), t};
+      point_[i] = {Vec3d(c), t};
       if (i > 0) {  // trapezoids over the value axis
-        tau_[size_t(i)] = tau_[size_t(i - 1)] + 0.5 * (prev_tau + t) * dv;
-        ctau_[size_t(i)] = ctau_[size_t(i - 1)] + (prev_ctau + Vec3d(c) * t) * (0.5 * dv);
+        const Entry& prev = point_[i - 1];
+        tau_[i] = tau_[i - 1] + 0.5 * (prev.tau + t) * dv_;
+        ctau_[i] = ctau_[i - 1] + (prev.color * prev.tau + Vec3d(c) * t) * (0.5 * dv_);
       }
-      prev_tau = t;
-      prev_ctau = Vec3d(c) * t;
     }
     // Up to the entry before the first with any extinction, segments are transparent.
     size_t first = 0;
     while (first < point_.size() && point_[first].tau == 0) ++first;
-    clear_up_to_ = first == 0 ? -kInfinity : first == point_.size() ? kInfinity : lo_ + double(first - 1) * dv;
+    clear_up_to_ = first == 0 ? -kInfinity : first == point_.size() ? kInfinity : lo_ + double(first - 1) * dv_;
   }
 
   /// @brief The segment's opacity and colour (not premultiplied) for a value going linearly

@@ -215,14 +215,17 @@ class GigaVoxels : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new testing::TempDir();
-    BuildOptions o;
-    o.brick_size = 8;
-    auto ml = make_field_source(make_field("marschner-lobb"), {64, 64, 64}, ValueType::f32);
-    build_store(*ml, dir_->file("ml.store"), o);
-    auto sphere = make_field_source(make_field("sphere"), {64, 64, 64}, ValueType::f32);
-    build_store(*sphere, dir_->file("sphere.store"), o);
+    field_store("marschner-lobb", 64, "ml.store");
+    field_store("sphere", 64, "sphere.store");
   }
   static void TearDownTestSuite() { delete dir_; }
+  /// A procedural field sampled on n^3 as f32 in 8^3 bricks, as dir_'s store `name`; its path.
+  static std::string field_store(const std::string& field, int64_t n, const std::string& name, const FieldParamValues& params = {}) {
+    BuildOptions o;
+    o.brick_size = 8;
+    build_store(*make_field_source(make_field(field, params), {n, n, n}, ValueType::f32), dir_->file(name), o);
+    return dir_->file(name);
+  }
 
   static Scene scene(const std::string& extra, int size = 64, const std::string& camera = kCamera) {
     const std::string text = R"({"dataset": "ml.store", "image": {"width": )" + std::to_string(size) + R"(, "height": )" +
@@ -411,10 +414,7 @@ TEST_F(GigaVoxels, DvrLeapsClearGroupsWhereTwoLevelsBlend) {
   // than step by step, so the image is another sampling of the same integral: as close to the
   // reference as marching every step, with fewer samples. A 128^3 sphere, so that the blended
   // levels have groups finer than the shell's distance to the nodes' corners.
-  const std::string store = dir_->file("sphere128.store");
-  BuildOptions o;
-  o.brick_size = 8;
-  build_store(*make_field_source(make_field("sphere"), {128, 128, 128}, ValueType::f32), store, o);
+  const std::string store = field_store("sphere", 128, "sphere128.store");
   Scene sc = scene(R"("mode": "dvr", "values": "stored", "quality": {"lod_ratio": 2}, "transfer_function": {"points": [
       {"value": -0.03, "color": [0.2, 0.4, 0.9], "opacity": 0}, {"value": 0, "color": [1, 0.4, 0.2], "opacity": 0.5},
       {"value": 0.03, "color": [0.2, 0.4, 0.9], "opacity": 0}]})", 128);
@@ -441,10 +441,7 @@ TEST_F(GigaVoxels, DvrIntegratesEveryPartOfTheRayOnce) {
   // ray leaves the volume, and those where constant nodes (integrated whole) meet bricks
   // (sampled). The sphere's distance is bricks everywhere; sparse blobs lie in a constant
   // background. Steps that divide nothing.
-  BuildOptions o;
-  o.brick_size = 8;
-  const std::string blobs = dir_->file("blobs.store");
-  build_store(*make_field_source(make_field("sparse-blobs"), {64, 64, 64}, ValueType::f32), blobs, o);
+  const std::string blobs = field_store("sparse-blobs", 64, "blobs.store");
   Scene sc = scene(R"("mode": "dvr", "values": "stored", "shading": {"light": "none"}, "transfer_function": {"points": [
       {"value": -10, "color": [0.8, 0.6, 0.2], "opacity": 0.02}, {"value": 10, "color": [0.8, 0.6, 0.2], "opacity": 0.02}]})", 32);
   // The sponge (source 1): its empty nodes are constant, and its box is the tree's, so the
@@ -527,13 +524,10 @@ TEST_F(GigaVoxels, AStepLongerThanANodeStillEntersAndSearchesEveryNodeItCrosses)
   // - the position a step reached past a node's exit decided the next node, so a node the ray
   //   left within that step was never entered;
   // - a step from one cube of clear cell groups into another was not searched between them.
-  BuildOptions o;
-  o.brick_size = 8;
-  auto corner = make_field_source(make_field("sphere", {{"radius", 0.1}}), {64, 64, 64}, ValueType::f32);
-  build_store(*corner, dir_->file("corner-sphere.store"), o);
+  const std::string corner = field_store("sphere", 64, "corner-sphere.store", {{"radius", 0.1}});
   const std::string close = R"("camera": {"eye": [0.95, -0.1, 0.9], "target": [0.5, 0.5, 0.5], "fov_degrees": 35})";
   Scene sc = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.0}], "quality": {"lod_ratio": 0.25})", 96, close);
-  sc.dataset = dir_->file("corner-sphere.store");
+  sc.dataset = corner;
   RenderSession ref(sc, backend_options("reference"));
   FrameBuffers truth;
   ref.render(0, truth, kAll);
