@@ -146,6 +146,7 @@ class BrickCache {
   const StoreLayout& layout() const { return store_.layout(); }
   const NodeTable& nodes() const { return store_.nodes(); }
   uint32_t pool_slots() const { return slots_.capacity(); }
+  const CacheConfig& config() const { return config_; }
   /// @brief Slot data in the pool (for renderers that address the pool directly).
   const std::byte* slot_data(uint32_t slot) const { return pool_.get() + size_t(slot) * brick_bytes_; }
 

@@ -1,5 +1,6 @@
 #include "renderers/common/render.h"
 
+#include <algorithm>
 #include <vector>
 
 #include <fmt/format.h>
@@ -72,6 +73,14 @@ CacheConfig cache_config(const Scene& scene) {
   return c;
 }
 
+CacheConfig share_l1_budget(CacheConfig c, const BrickFormat& format, const BackendInfo& info, const BackendParams& params) {
+  if (!info.l1_staging_slots) return c;
+  const uint64_t budget_slots = c.l1_slots ? c.l1_slots : c.l1_bytes / format.bytes();
+  c.l1_bytes = budget_slots * format.bytes();
+  c.l1_slots = uint32_t(std::clamp<uint64_t>(info.l1_staging_slots(params), 1, std::max<uint64_t>(budget_slots / 4, 1)));
+  return c;
+}
+
 namespace {
 std::map<std::string, double> merged_params(const Scene& scene, const RenderSession::Options& o, const std::string& backend) {
   std::map<std::string, double> p;
@@ -130,7 +139,8 @@ void RenderSession::build() {
   renderer_.reset();
   context_.reset();
   cache_.reset();
-  cache_ = std::make_unique<BrickCache>(*store_, options_.cache ? *options_.cache : cache_config(scene_));
+  const CacheConfig asked = options_.cache ? *options_.cache : cache_config(scene_);
+  cache_ = std::make_unique<BrickCache>(*store_, share_l1_budget(asked, store_->format(), entry_->info, params_));
   context_ = std::make_unique<RenderContext>(scene_, *cache_);
   renderer_ = entry_->create(*context_, params_);
 }

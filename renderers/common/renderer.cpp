@@ -71,6 +71,11 @@ const RenderContext::ValueSpan& RenderContext::range_below(const BrickKey& k) co
   return ranges_below_[k.level][size_t(layout().linear_index(k))];
 }
 
+uint64_t RenderContext::own_pool_bytes() const {
+  const uint64_t budget = cache_.config().l1_bytes, pool = uint64_t(cache_.pool_slots()) * cache_.format().bytes();
+  return budget > pool ? budget - pool : 0;
+}
+
 RenderContext::RenderContext(const Scene& scene, BrickCache& cache) : scene_(scene), cache_(cache) {
   const Manifest& m = cache.store().manifest();
   VolumeGeometry& g = geometry_;

@@ -37,6 +37,8 @@ struct BackendParam {
   std::string doc;
 };
 
+class BackendParams;
+
 /// @brief What a back end declares about itself.
 struct BackendInfo {
   std::string name;
@@ -48,6 +50,12 @@ struct BackendInfo {
   /// The parameter `brickyard bench` sweeps, and its default sweep from fast to accurate.
   std::string quality_param;
   std::vector<double> quality_sweep;
+  /// A back end that keeps a fixed brick pool of its own, copied from the cache's L1 (the
+  /// GigaVoxels brick pool): the L1 slots it needs to stage one frame's copies. The scene's L1
+  /// budget is then shared, not spent twice: the cache's L1 takes these slots (at most a quarter
+  /// of the budget) and RenderContext::own_pool_bytes() is the rest. Unset: the cache's L1 is
+  /// the whole budget.
+  std::function<uint32_t(const BackendParams&)> l1_staging_slots;
 
   bool accepts(DataKind kind, RenderMode mode) const;
 };
@@ -113,6 +121,9 @@ class RenderContext {
   bool needs_gradients(const FrameOutputs& outputs) const {
     return outputs.normals || (scene_.shading.lit() && scene_.mode != RenderMode::mip);
   }
+  /// @brief The part of the cache's L1 budget its pool left: what a back end that keeps its
+  /// own brick pool (BackendInfo::l1_staging_slots) may allocate for it.
+  uint64_t own_pool_bytes() const;
 
  private:
   const Scene& scene_;

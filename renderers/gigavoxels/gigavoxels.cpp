@@ -374,6 +374,7 @@ class GigaVoxelsRenderer final : public Renderer {
                      {"node_blocks", double(tree_.block_capacity())},
                      {"bricks_in_use", double(tree_.bricks_in_use())},
                      {"brick_slots", double(tree_.brick_capacity())},
+                     {"brick_pool_bytes", double(uint64_t(tree_.brick_capacity()) * slot_bytes(m_))},
                      {"bricks_used", double(tree_.bricks_used_this_frame())},
                      {"failed_allocations", double(tree_.counters().failed_allocations - failed_before_)},
                      {"loader_ms", loader_seconds_ * 1e3}};
@@ -391,11 +392,15 @@ class GigaVoxelsRenderer final : public Renderer {
   const BrickDifferences& brick_differences_of(uint32_t slot) const { return brick_differences_[slot]; }
 
  private:
+  /// The brick pool: what the L1 budget holds once the cache's L1 has the slots the loader
+  /// stages its copies through (l1_staging_slots), with each slot's bounds.
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
-    const uint64_t e = uint64_t(s.brick_size() + 2);
-    const uint64_t slot_bytes = e * e * e * sizeof(Voxel) + group_count(s.brick_size()) + sizeof(BrickDifferences);
-    return uint32_t(std::clamp<uint64_t>(ctx.scene().cache.l1_bytes / slot_bytes, 8, 1u << 20));
+    return uint32_t(std::clamp<uint64_t>(ctx.own_pool_bytes() / slot_bytes(s.brick_size()), 8, 1u << 20));
+  }
+  static uint64_t slot_bytes(int m) {
+    const uint64_t e = uint64_t(m + 2);
+    return e * e * e * sizeof(Voxel) + group_count(m) + sizeof(BrickDifferences);
   }
   /// Cell groups per axis: the cells start at sample coordinates 0 .. M (M + 1 of them, the
   /// border included), kCellGroup to a group.
@@ -473,6 +478,10 @@ class GigaVoxelsRenderer final : public Renderer {
       }
     }
     if (address != 0 && !tree_.brick_slot_available()) return false;  // the root's slot is always there
+    if (!wait) {
+      if (lookups_left_ == 0) return false;  // asked for again next frame
+      --lookups_left_;
+    }
     scratch_.resize(tree_.brick_values());
     if (!source_->fill(a, scratch_.data(), wait, float(a.depth))) return false;
     const uint32_t slot = tree_.allocate_brick(address);
@@ -498,6 +507,7 @@ class GigaVoxelsRenderer final : public Renderer {
     for (uint32_t e : request_list_) tree_.mark_used(e & kAddressMask);
     tree_.end_of_feedback();
     const bool wait = allow_interrupt_;
+    lookups_left_ = ctx_.cache().pool_slots();
     int subdivisions = 0, uploads = 0;
     last_pass_progress_ = 0;
     for (uint32_t e : request_list_) {
@@ -1344,6 +1354,7 @@ class GigaVoxelsRenderer final : public Renderer {
   uint64_t produced_before_ = 0, loaded_before_ = 0, failed_before_ = 0;
   int stalled_frames_ = 0;
   double loader_seconds_ = 0;
+  uint32_t lookups_left_ = 0;  // this frame's, at most the bricks the cache's L1 stages
 };
 
 }  // namespace
@@ -1364,7 +1375,7 @@ BackendEntry gigavoxels_backend() {
       {"slots_per_pixel", 4, 1, 16, "feedback list length per ray (shared by the rays of a 2x2 packet)"},
       {"subdivide_budget", 512, 1, 1e6, "node subdivisions per frame"},
       {"upload_budget", 512, 1, 1e6, "bricks written into the brick pool per frame"},
-      {"brick_slots", 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds"},
+      {"brick_slots", 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds beside the cache's L1, which keeps 2 upload_budget slots to stage copies"},
       {"node_blocks", 0, 0, 1 << 22, "node pool blocks of N^3 nodes; 0: twice the brick slots"},
       {"source", 0, 0, 2, "0: the store; 1: an instanced Menger sponge (N = 3) filling the volume's box; "
                           "2: the store, amplified below its finest level by Perlin noise"},
@@ -1382,6 +1393,9 @@ BackendEntry gigavoxels_backend() {
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
+  // The loader looks up at most this many bricks a frame (lookups_left_), so none it asked for
+  // leaves the cache's L1 before it is copied; the sponge reads no stored brick.
+  e.info.l1_staging_slots = [](const BackendParams& p) { return p["source"] == 1 ? 1u : uint32_t(2 * p["upload_budget"]); };
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
     GigaVoxelsParams gp;
     gp.lod_ratio = p["lod_ratio"];

@@ -191,10 +191,11 @@ struct Rendered {
 /// Renders one frame of `scene` with a camera in world coordinates.
 Rendered render_world(const Scene& scene, const Camera& camera) {
   BrickStore store(scene.dataset);
-  BrickCache cache(store, cache_config(scene));
-  RenderContext context(scene, cache);
   const BackendEntry& entry = builtin_backends().find(scene.backend);
-  std::unique_ptr<Renderer> renderer = entry.create(context, BackendParams(entry.info, scene.backend_params));
+  const BackendParams params(entry.info, scene.backend_params);
+  BrickCache cache(store, share_l1_budget(cache_config(scene), store.format(), entry.info, params));
+  RenderContext context(scene, cache);
+  std::unique_ptr<Renderer> renderer = entry.create(context, params);
   FrameSetup setup;
   setup.camera = camera;
   setup.width = scene.width;
