@@ -62,11 +62,19 @@ class ShadingModel {
   /// @param n unit normal facing the viewer; `view` unit vector towards the eye, `light` unit
   /// vector towards the light.
   Lighting lighting(const Vec3d& n, const Vec3d& view, const Vec3d& light, bool shadowed) const {
+    return lighting_half(n, light, half_vector(view, light), shadowed);
+  }
+  /// @brief Blinn's half vector between the directions towards the eye and the light.
+  static Vec3d half_vector(const Vec3d& view, const Vec3d& light) { return normalize(light + view); }
+  /// @brief Whether the light's direction is the same all along a primary ray (then the half
+  /// vector is too, and lighting_half() saves a normalisation per sample).
+  bool light_fixed_along_rays() const { return s_.light == LightKind::headlight || s_.light == LightKind::directional; }
+  /// @brief lighting() with the half vector `half` (half_vector()) given.
+  Lighting lighting_half(const Vec3d& n, const Vec3d& light, const Vec3d& half, bool shadowed) const {
     Lighting l;
     if (shadowed) return l;
     l.diffuse = float(std::fabs(dot(n, light)));
-    const Vec3d h = normalize(light + view);
-    const double nh = std::fabs(dot(n, h));
+    const double nh = std::fabs(dot(n, half));
     if (nh > 0) l.specular = float(shininess_power_ ? pow_uint(nh, shininess_power_) : std::pow(nh, double(s_.shininess)));
     return l;
   }

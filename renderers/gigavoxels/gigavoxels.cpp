@@ -302,6 +302,7 @@ class GigaVoxelsRenderer final : public Renderer {
     search_halvings_ = p.hidden_crossings > 0 ? p.hidden_crossings + int(std::ceil(std::log2(step_) - 1e-9)) : 0;
     search_hidden_crossings_ = scene_.mode == RenderMode::iso && search_halvings_ > 0;
     finest_voxel_unit_ = 1.0 / extent_;  // one finest voxel in unit coordinates (opacity reference)
+    unit_gradient_to_world_ = Vec3d(1.0) / (geo_.spacing * extent_);
     tree_.set_root(root_node(), NodeAddress{});
     if (p.source != 1 && ctx.cache().format().apron < 1)  // the sponge reads no stored brick
       throw Error(Errc::unsupported, "gigavoxels copies bricks with a 1-voxel border: the store needs an apron of at least 1")
@@ -838,6 +839,12 @@ class GigaVoxelsRenderer final : public Renderer {
         inv_dir[a] = 1.0 / dir[a];
       }
       scale_eye();
+      light_fixed = !iso && r.shading_.lit() && r.shading_.light_fixed_along_rays();
+      if (light_fixed) {
+        double light_distance;
+        ray_light = r.shading_.to_light_along(ray.world, 1.0, light_distance);
+        ray_half = ShadingModel::half_vector(-ray.world.dir, ray_light);
+      }
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
       const auto to_voxels = [&](double dt) { return dt * unit_per_t / r.finest_voxel_unit_; };  // opacity's unit
       const double stop = r.scene_.quality.termination_opacity;
@@ -1264,10 +1271,11 @@ class GigaVoxelsRenderer final : public Renderer {
       Vec3d n(0.0);
       if (gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0)) {
         ++counters.gradients;
-        n = facing_normal(gradient / (r.geo_.spacing * r.extent_), ray.world.dir);
+        n = facing_normal(gradient * r.unit_gradient_to_world_, ray.world.dir);
       }
       if (normal) *normal = n;
       if (!r.shading_.lit()) return {};
+      if (light_fixed && t > 0) return r.shading_.lighting_half(n, ray_light, ray_half, false);
       double light_distance;
       return r.shading_.lighting(n, -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);
     }
@@ -1302,6 +1310,10 @@ class GigaVoxelsRenderer final : public Renderer {
     }
 
     double eye[3] = {}, dir[3] = {}, inv_dir[3] = {};  // the ray in the unit cube, per unit t
+    // DVR under a headlight or a directional light: the direction to the light and the half
+    // vector, the same at every sample of the ray (past its origin).
+    bool light_fixed = false;
+    Vec3d ray_light{0.0}, ray_half{0.0};
     /// The last descent (of this ray, or of the tile's previous ray), root first.
     std::vector<PathNode> path;
     int path_size = 0;
@@ -1326,6 +1338,7 @@ class GigaVoxelsRenderer final : public Renderer {
   std::vector<double> inv_scales_;  // 1 / N^depth, rounded
   double unit_offset_ = 0.5;   // unit = (voxel + unit_offset) / extent
   double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1;
+  Vec3d unit_gradient_to_world_{1.0};  // a gradient per unit-cube length to one per world length
   double footprint_per_t_ = 0;  // a pixel's footprint per unit distance, unit coordinates, times lod_ratio
   double inv_log2_arity_ = 1;
   int n_ = 2, m_ = 32;

@@ -253,6 +253,21 @@ TEST_F(GigaVoxels, ExactModeMatchesTheReferenceInOneFrame) {
   }
 }
 
+TEST_F(GigaVoxels, LitDvrMatchesTheReferenceUnderEveryKindOfLight) {
+  // Under a headlight or a directional light a ray's light direction and half vector are the
+  // same at every sample, and computed once per ray; a point light's change along it.
+  for (const char* light : {R"({"light": "headlight"})", R"({"light": "directional", "light_direction": [1, 0.3, -0.5]})",
+                                   R"({"light": "point", "light_position": [1.4, 0.5, 0.2]})"}) {
+    SCOPED_TRACE(light);
+    const Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.25}, "shading": )" + std::string(light), 64);
+    FrameBuffers fb;
+    RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}, {"step", 0.25}}));
+    g.render(0, fb, kAll);
+    ASSERT_TRUE(all_finite(fb));
+    expect_as_good_as_raymarch(sc, fb, 0.25, 0.02);
+  }
+}
+
 TEST(GigaVoxelsCellGroups, DistancesAreChessboardDistancesToTheNearestVisibleGroup) {
   // Against brute force on random grids of every density, the brick sizes' grid widths among
   // them (M = 8, 32 and 81 give 3, 9 and 21); with no visible group, every group is far.
