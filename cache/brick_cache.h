@@ -42,6 +42,9 @@ struct CacheConfig {
   uint32_t upload_bricks_per_frame = 0;  ///< 0: unlimited
   uint64_t upload_bytes_per_frame = 0;   ///< 0: unlimited
   std::string trace_path;                ///< record every access to this file (brickyard format)
+  /// The part of the L1 budget that a back end's own brick pool holds beside this cache's L1
+  /// (share_l1_budget); 0: none, the cache's L1 is the whole budget.
+  uint64_t backend_pool_bytes = 0;
 };
 
 class BrickCache;

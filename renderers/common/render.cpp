@@ -74,10 +74,13 @@ CacheConfig cache_config(const Scene& scene) {
 }
 
 CacheConfig share_l1_budget(CacheConfig c, const BrickFormat& format, const BackendInfo& info, const BackendParams& params) {
-  if (!info.l1_staging_slots) return c;
+  const uint64_t staging = info.l1_staging_slots ? info.l1_staging_slots(params) : 0;
   const uint64_t budget_slots = c.l1_slots ? c.l1_slots : c.l1_bytes / format.bytes();
-  c.l1_bytes = budget_slots * format.bytes();
-  c.l1_slots = uint32_t(std::clamp<uint64_t>(info.l1_staging_slots(params), 1, std::max<uint64_t>(budget_slots / 4, 1)));
+  if (staging == 0 || budget_slots == 0) return c;  // not shared; a budget under one brick is the cache's error
+  c.l1_slots = uint32_t(std::clamp<uint64_t>(staging, 1, std::max<uint64_t>(budget_slots / 4, 1)));
+  c.l1_bytes = uint64_t(c.l1_slots) * format.bytes();
+  c.backend_pool_bytes = (budget_slots - c.l1_slots) * format.bytes();
+  c.l1_policy = "lru";  // a brick staged last is copied next: the policy under study is the back end's own pool's
   return c;
 }
 

@@ -69,7 +69,8 @@ class RenderSession {
 CacheConfig cache_config(const Scene& scene);
 /// @brief `c` with its L1 budget shared with a back end that keeps its own brick pool
 /// (BackendInfo::l1_staging_slots): the cache's L1 holds only the slots that back end stages
-/// through, at most a quarter of the budget. Other back ends' configurations are unchanged.
+/// through, at most a quarter of the budget, under LRU; CacheConfig::backend_pool_bytes is the
+/// rest. Other back ends' configurations are unchanged.
 CacheConfig share_l1_budget(CacheConfig c, const BrickFormat& format, const BackendInfo& info, const BackendParams& params);
 
 }  // namespace brickyard

@@ -71,9 +71,9 @@ const RenderContext::ValueSpan& RenderContext::range_below(const BrickKey& k) co
   return ranges_below_[k.level][size_t(layout().linear_index(k))];
 }
 
-uint64_t RenderContext::own_pool_bytes() const {
-  const uint64_t budget = cache_.config().l1_bytes, pool = uint64_t(cache_.pool_slots()) * cache_.format().bytes();
-  return budget > pool ? budget - pool : 0;
+uint64_t RenderContext::backend_pool_bytes() const {
+  const CacheConfig& c = cache_.config();
+  return c.backend_pool_bytes ? c.backend_pool_bytes : scene_.cache.l1_bytes;
 }
 
 RenderContext::RenderContext(const Scene& scene, BrickCache& cache) : scene_(scene), cache_(cache) {

@@ -53,8 +53,8 @@ struct BackendInfo {
   /// A back end that keeps a fixed brick pool of its own, copied from the cache's L1 (the
   /// GigaVoxels brick pool): the L1 slots it needs to stage one frame's copies. The scene's L1
   /// budget is then shared, not spent twice: the cache's L1 takes these slots (at most a quarter
-  /// of the budget) and RenderContext::own_pool_bytes() is the rest. Unset: the cache's L1 is
-  /// the whole budget.
+  /// of the budget, under LRU) and RenderContext::backend_pool_bytes() is the rest. Unset, or 0
+  /// for some parameters (a pool sized by hand): the cache's L1 is the whole budget.
   std::function<uint32_t(const BackendParams&)> l1_staging_slots;
 
   bool accepts(DataKind kind, RenderMode mode) const;
@@ -121,9 +121,10 @@ class RenderContext {
   bool needs_gradients(const FrameOutputs& outputs) const {
     return outputs.normals || (scene_.shading.lit() && scene_.mode != RenderMode::mip);
   }
-  /// @brief The part of the cache's L1 budget its pool left: what a back end that keeps its
-  /// own brick pool (BackendInfo::l1_staging_slots) may allocate for it.
-  uint64_t own_pool_bytes() const;
+  /// @brief What a back end that keeps its own brick pool (BackendInfo::l1_staging_slots) may
+  /// allocate for it: the part of the L1 budget the cache's L1 left (share_l1_budget), or the
+  /// whole budget for a cache built without sharing it.
+  uint64_t backend_pool_bytes() const;
 
  private:
   const Scene& scene_;

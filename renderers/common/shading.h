@@ -20,8 +20,6 @@ class ShadingModel {
         shininess_power_(s.shininess == std::rint(s.shininess) && s.shininess >= 1 && s.shininess <= 4096 ? unsigned(s.shininess) : 0) {}
 
   bool lit() const { return s_.lit(); }
-  /// @brief Unit vector from p towards the light, and the distance to it (infinite for
-  /// directional lights). The headlight sits at the eye.
   /// @brief to_light() at the point t along a primary ray (origin at the eye, unit direction).
   /// The headlight lies exactly back along the ray: no difference of two nearly equal absolute
   /// positions, which loses every bit at deep zoom.
@@ -30,6 +28,8 @@ class ShadingModel {
     distance = t;
     return t > 0 ? -primary.dir : Vec3d(0, 0, 1);
   }
+  /// @brief Unit vector from p towards the light, and the distance to it (infinite for
+  /// directional lights). The headlight sits at the eye.
   Vec3d to_light(const Vec3d& p, const Vec3d& eye, double& distance) const {
     switch (s_.light) {
       case LightKind::headlight: {
@@ -62,15 +62,16 @@ class ShadingModel {
   /// @param n unit normal facing the viewer; `view` unit vector towards the eye, `light` unit
   /// vector towards the light.
   Lighting lighting(const Vec3d& n, const Vec3d& view, const Vec3d& light, bool shadowed) const {
-    return lighting_half(n, light, half_vector(view, light), shadowed);
+    return lighting_with_half(n, light, half_vector(view, light), shadowed);
   }
   /// @brief Blinn's half vector between the directions towards the eye and the light.
   static Vec3d half_vector(const Vec3d& view, const Vec3d& light) { return normalize(light + view); }
-  /// @brief Whether the light's direction is the same all along a primary ray (then the half
-  /// vector is too, and lighting_half() saves a normalisation per sample).
+  /// @brief Whether the direction to the light is the same at every t > 0 along a primary ray
+  /// (to_light_along()); then the half vector is too, and lighting_with_half() saves a
+  /// normalisation per sample.
   bool light_fixed_along_rays() const { return s_.light == LightKind::headlight || s_.light == LightKind::directional; }
   /// @brief lighting() with the half vector `half` (half_vector()) given.
-  Lighting lighting_half(const Vec3d& n, const Vec3d& light, const Vec3d& half, bool shadowed) const {
+  Lighting lighting_with_half(const Vec3d& n, const Vec3d& light, const Vec3d& half, bool shadowed) const {
     Lighting l;
     if (shadowed) return l;
     l.diffuse = float(std::fabs(dot(n, light)));

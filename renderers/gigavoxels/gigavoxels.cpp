@@ -59,6 +59,9 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr uint32_t kAddressMask = 0x3fffffffu;
 constexpr uint32_t kWantsSubdivision = 0x80000000u;
 constexpr uint32_t kWantsBrick = 0x40000000u;
+// The amplified store's coarse sampler reads stored bricks through the cache's L1 beside the
+// loader's staged ones: the slots kept for it.
+constexpr uint32_t kCoarseSamplerSlots = 64;
 
 struct GigaVoxelsParams {
   double lod_ratio = 0;  // 0: the scene's quality.lod_ratio
@@ -68,7 +71,7 @@ struct GigaVoxelsParams {
   int slots_per_pixel = 4;
   int subdivide_budget = 512;  // subdivisions per frame
   int upload_budget = 512;     // bricks written into the pool per frame
-  uint32_t brick_slots = 0;    // 0: as many as the scene's L1 budget holds
+  uint32_t brick_slots = 0;    // 0: what the L1 budget holds beside the cache's staging L1
   uint32_t node_blocks = 0;    // 0: twice the brick slots
   int source = 0;              // 0 store, 1 Menger sponge (N = 3), 2 the store amplified
   int menger_brick = 27;
@@ -99,6 +102,9 @@ class Source {
   /// Bricks computed so far, and bricks read from the store.
   virtual uint64_t produced() const { return 0; }
   virtual uint64_t loaded() const { return 0; }
+  /// How many bricks fill() may look up in the cache without waiting until the next call: one
+  /// pass's worth, no more than the cache's L1 stages (so none leaves it before it is copied).
+  virtual void set_lookup_budget(uint32_t lookups) { (void)lookups; }
 };
 
 /// A store's brick octree is the N = 2 tree: a node at depth d is the brick of level d.
@@ -128,6 +134,10 @@ class StoreSource final : public Source {
   }
   bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
     const BrickKey k = store_key(a);
+    if (!wait) {
+      if (lookups_left_ == 0) return false;  // asked for again by the next pass's rays
+      --lookups_left_;
+    }
     BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, true);
     const int64_t m = layout_.brick_size, e = m + 2;
     if (h.constant()) {  // a level's constant over a subtree that is not
@@ -148,11 +158,13 @@ class StoreSource final : public Source {
     return true;
   }
   uint64_t loaded() const override { return loaded_; }
+  void set_lookup_budget(uint32_t lookups) override { lookups_left_ = lookups; }
 
  private:
   const RenderContext& ctx_;
   const StoreLayout& layout_;
   uint64_t loaded_ = 0;
+  uint32_t lookups_left_ = std::numeric_limits<uint32_t>::max();
 };
 
 /// The store down to its finest level, then Perlin-noise amplification of it (procedural.h)
@@ -227,6 +239,10 @@ class AmplifiedSource final : public Source {
   }
   uint64_t produced() const override { return produced_; }
   uint64_t loaded() const override { return stored_.loaded(); }
+  void set_lookup_budget(uint32_t lookups) override {
+    const uint32_t slots = ctx_.cache().pool_slots();
+    stored_.set_lookup_budget(std::min(lookups, slots - std::min(kCoarseSamplerSlots, slots / 2)));
+  }
 
  private:
   const RenderContext& ctx_;
@@ -397,7 +413,7 @@ class GigaVoxelsRenderer final : public Renderer {
   /// stages its copies through (l1_staging_slots), with each slot's bounds.
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
-    return uint32_t(std::clamp<uint64_t>(ctx.own_pool_bytes() / slot_bytes(s.brick_size()), 8, 1u << 20));
+    return uint32_t(std::clamp<uint64_t>(ctx.backend_pool_bytes() / slot_bytes(s.brick_size()), 8, 1u << 20));
   }
   static uint64_t slot_bytes(int m) {
     const uint64_t e = uint64_t(m + 2);
@@ -479,10 +495,6 @@ class GigaVoxelsRenderer final : public Renderer {
       }
     }
     if (address != 0 && !tree_.brick_slot_available()) return false;  // the root's slot is always there
-    if (!wait) {
-      if (lookups_left_ == 0) return false;  // asked for again next frame
-      --lookups_left_;
-    }
     scratch_.resize(tree_.brick_values());
     if (!source_->fill(a, scratch_.data(), wait, float(a.depth))) return false;
     const uint32_t slot = tree_.allocate_brick(address);
@@ -508,7 +520,7 @@ class GigaVoxelsRenderer final : public Renderer {
     for (uint32_t e : request_list_) tree_.mark_used(e & kAddressMask);
     tree_.end_of_feedback();
     const bool wait = allow_interrupt_;
-    lookups_left_ = ctx_.cache().pool_slots();
+    source_->set_lookup_budget(ctx_.cache().pool_slots());
     int subdivisions = 0, uploads = 0;
     last_pass_progress_ = 0;
     for (uint32_t e : request_list_) {
@@ -613,9 +625,14 @@ class GigaVoxelsRenderer final : public Renderer {
     const ImageRays rays;
     RayCounters& counters;
     const bool gradients;
+    // DVR under a headlight or a directional light: the direction to the light and the half
+    // vector are the same at every sample of a ray (past its origin), computed once per ray.
+    const bool light_fixed;
+    Vec3d ray_light{0.0}, ray_half{0.0};
 
     Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
         : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
+          light_fixed(r.scene_.mode == RenderMode::dvr && r.shading_.lit() && r.shading_.light_fixed_along_rays()),
           path(size_t(r.source_->max_depth()) + 1), scaled_eye(size_t(r.source_->max_depth()) + 1) {}
 
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t.
@@ -839,10 +856,9 @@ class GigaVoxelsRenderer final : public Renderer {
         inv_dir[a] = 1.0 / dir[a];
       }
       scale_eye();
-      light_fixed = !iso && r.shading_.lit() && r.shading_.light_fixed_along_rays();
       if (light_fixed) {
         double light_distance;
-        ray_light = r.shading_.to_light_along(ray.world, 1.0, light_distance);
+        ray_light = r.shading_.to_light_along(ray.world, 1.0, light_distance);  // the same at any t > 0
         ray_half = ShadingModel::half_vector(-ray.world.dir, ray_light);
       }
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
@@ -1275,7 +1291,7 @@ class GigaVoxelsRenderer final : public Renderer {
       }
       if (normal) *normal = n;
       if (!r.shading_.lit()) return {};
-      if (light_fixed && t > 0) return r.shading_.lighting_half(n, ray_light, ray_half, false);
+      if (light_fixed && t > 0) return r.shading_.lighting_with_half(n, ray_light, ray_half, false);
       double light_distance;
       return r.shading_.lighting(n, -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);
     }
@@ -1310,10 +1326,6 @@ class GigaVoxelsRenderer final : public Renderer {
     }
 
     double eye[3] = {}, dir[3] = {}, inv_dir[3] = {};  // the ray in the unit cube, per unit t
-    // DVR under a headlight or a directional light: the direction to the light and the half
-    // vector, the same at every sample of the ray (past its origin).
-    bool light_fixed = false;
-    Vec3d ray_light{0.0}, ray_half{0.0};
     /// The last descent (of this ray, or of the tile's previous ray), root first.
     std::vector<PathNode> path;
     int path_size = 0;
@@ -1367,7 +1379,6 @@ class GigaVoxelsRenderer final : public Renderer {
   uint64_t produced_before_ = 0, loaded_before_ = 0, failed_before_ = 0;
   int stalled_frames_ = 0;
   double loader_seconds_ = 0;
-  uint32_t lookups_left_ = 0;  // this frame's, at most the bricks the cache's L1 stages
 };
 
 }  // namespace
@@ -1388,7 +1399,7 @@ BackendEntry gigavoxels_backend() {
       {"slots_per_pixel", 4, 1, 16, "feedback list length per ray (shared by the rays of a 2x2 packet)"},
       {"subdivide_budget", 512, 1, 1e6, "node subdivisions per frame"},
       {"upload_budget", 512, 1, 1e6, "bricks written into the brick pool per frame"},
-      {"brick_slots", 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds beside the cache's L1, which keeps 2 upload_budget slots to stage copies"},
+      {"brick_slots", 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds beside the cache's L1, which then keeps 2 x upload_budget slots to stage copies (set: the cache's L1 keeps the whole budget)"},
       {"node_blocks", 0, 0, 1 << 22, "node pool blocks of N^3 nodes; 0: twice the brick slots"},
       {"source", 0, 0, 2, "0: the store; 1: an instanced Menger sponge (N = 3) filling the volume's box; "
                           "2: the store, amplified below its finest level by Perlin noise"},
@@ -1406,9 +1417,15 @@ BackendEntry gigavoxels_backend() {
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
-  // The loader looks up at most this many bricks a frame (lookups_left_), so none it asked for
-  // leaves the cache's L1 before it is copied; the sponge reads no stored brick.
-  e.info.l1_staging_slots = [](const BackendParams& p) { return p["source"] == 1 ? 1u : uint32_t(2 * p["upload_budget"]); };
+  // The loader looks up at most the staging slots' worth of bricks a pass (StoreSource's
+  // lookup budget), so none it asked for leaves the cache's L1 before it is copied; the
+  // amplified store's coarse sampler reads through L1 too, beside them; the sponge reads no
+  // stored brick. A pool sized by hand (brick_slots) leaves the cache the whole budget.
+  e.info.l1_staging_slots = [](const BackendParams& p) -> uint32_t {
+    if (p["brick_slots"] != 0) return 0;
+    if (p["source"] == 1) return 1;
+    return uint32_t(2 * p["upload_budget"]) + (p["source"] == 2 ? kCoarseSamplerSlots : 0);
+  };
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
     GigaVoxelsParams gp;
     gp.lod_ratio = p["lod_ratio"];

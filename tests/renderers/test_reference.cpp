@@ -784,5 +784,33 @@ TEST(ShadingModel, LightingIsAveragedBeforeItIsApplied) {
   }
 }
 
+TEST(ShadingModel, TheLightIsFixedAlongARayExactlyWhenItsDirectionIsTheSameAtEveryDistance) {
+  // A back end computes the light's direction and half vector once per ray only where
+  // light_fixed_along_rays() says every t > 0 gives the same direction.
+  VolumeGeometry geo;
+  geo.world = Box3d(Vec3d(0.0), Vec3d(2.0));
+  const Rayd ray(Vec3d(0.3, -2.0, 0.7), normalize(Vec3d(0.2, 1.0, -0.1)));
+  for (LightKind kind : {LightKind::headlight, LightKind::directional, LightKind::point}) {
+    Shading sh;
+    sh.light = kind;
+    sh.light_direction = Vec3d(1, 0.3, -0.5);
+    sh.light_position = Vec3d(0.9, 0.4, 0.2);
+    const ShadingModel m(sh, geo);
+    double distance;
+    const Vec3d first = m.to_light_along(ray, 0.25, distance);
+    bool same = true;
+    for (double t : {0.5, 1.0, 3.0, 40.0}) {
+      const Vec3d l = m.to_light_along(ray, t, distance);
+      same &= l.x == first.x && l.y == first.y && l.z == first.z;
+    }
+    EXPECT_EQ(m.light_fixed_along_rays(), same) << int(kind);
+    const Vec3d n = normalize(Vec3d(0.3, -0.8, 0.5)), view = -ray.dir;
+    const ShadingModel::Lighting a = m.lighting(n, view, first, false);
+    const ShadingModel::Lighting b = m.lighting_with_half(n, first, ShadingModel::half_vector(view, first), false);
+    EXPECT_EQ(a.diffuse, b.diffuse);
+    EXPECT_EQ(a.specular, b.specular);
+  }
+}
+
 }  // namespace
 }  // namespace brickyard

@@ -191,11 +191,10 @@ struct Rendered {
 /// Renders one frame of `scene` with a camera in world coordinates.
 Rendered render_world(const Scene& scene, const Camera& camera) {
   BrickStore store(scene.dataset);
-  const BackendEntry& entry = builtin_backends().find(scene.backend);
-  const BackendParams params(entry.info, scene.backend_params);
-  BrickCache cache(store, share_l1_budget(cache_config(scene), store.format(), entry.info, params));
+  BrickCache cache(store, cache_config(scene));
   RenderContext context(scene, cache);
-  std::unique_ptr<Renderer> renderer = entry.create(context, params);
+  const BackendEntry& entry = builtin_backends().find(scene.backend);
+  std::unique_ptr<Renderer> renderer = entry.create(context, BackendParams(entry.info, scene.backend_params));
   FrameSetup setup;
   setup.camera = camera;
   setup.width = scene.width;
