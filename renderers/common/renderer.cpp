@@ -73,7 +73,7 @@ const RenderContext::ValueSpan& RenderContext::range_below(const BrickKey& k) co
 
 uint64_t RenderContext::backend_pool_bytes() const {
   const CacheConfig& c = cache_.config();
-  return c.backend_pool_bytes ? c.backend_pool_bytes : scene_.cache.l1_bytes;
+  return c.backend_pool_bytes ? c.backend_pool_bytes : c.l1_bytes;
 }
 
 RenderContext::RenderContext(const Scene& scene, BrickCache& cache) : scene_(scene), cache_(cache) {

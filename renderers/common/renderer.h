@@ -123,7 +123,7 @@ class RenderContext {
   }
   /// @brief What a back end that keeps its own brick pool (BackendInfo::l1_staging_slots) may
   /// allocate for it: the part of the L1 budget the cache's L1 left (share_l1_budget), or the
-  /// whole budget for a cache built without sharing it.
+  /// cache's whole L1 budget for a cache built without sharing it.
   uint64_t backend_pool_bytes() const;
 
  private:

@@ -1238,7 +1238,7 @@ class GigaVoxelsRenderer final : public Renderer {
     double refine_hit(const Levels& lv, double lambda, double t0, double t1, float v0, float v1) {
       // Bisected down to 2^-refine voxels of the level sampled, whatever the bracket's length.
       const NodeFrame& frame = blend(lv, lambda).finer->frame;
-      const double voxels = (t1 - t0) * double(r.m_) * std::sqrt(frame.dir[0] * frame.dir[0] + frame.dir[1] * frame.dir[1] + frame.dir[2] * frame.dir[2]);
+      const double voxels = (t1 - t0) * double(r.m_) * length(Vec3d(frame.dir[0], frame.dir[1], frame.dir[2]));
       const int steps = voxels > 0 ? int(std::clamp(double(r.p_.refine) + std::ceil(std::log2(voxels)), 0.0, 60.0)) : 0;
       // The first surface crossed between the two samples.
       double best = t1;
