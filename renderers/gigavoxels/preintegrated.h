@@ -53,11 +53,11 @@ class PreintegratedTf {
   }
 
   /// @brief The segment's opacity and colour (not premultiplied) for a value going linearly
-  /// from front to back over length_voxels finest voxels. Returns its mean extinction per voxel.
-  double segment(float front, float back, double length_voxels, Vec3f& color, float& alpha) const {
+  /// from front to back over length_voxels finest voxels.
+  void segment(float front, float back, double length_voxels, Vec3f& color, float& alpha) const {
     if (double(std::max(front, back)) <= clear_up_to_) {  // most of a sparse volume: no table, no exp
       color = Vec3f(0.0f), alpha = 0;
-      return 0;
+      return;
     }
     const double xf = position(front), xb = position(back);
     double tau;  // mean extinction per voxel over the segment
@@ -72,10 +72,8 @@ class PreintegratedTf {
       tau = (b.tau - f.tau) * inv;
       ctau = (b.ctau - f.ctau) * inv;
     }
-    tau = std::max(0.0, tau);
-    alpha = float(1.0 - std::exp(-tau * length_voxels));
+    alpha = float(1.0 - std::exp(-std::max(0.0, tau) * length_voxels));
     color = tau > 1e-12 ? Vec3f(ctau / tau) : Vec3f(0.0f);
-    return tau;
   }
 
  private:
