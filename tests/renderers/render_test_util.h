@@ -42,6 +42,14 @@ inline bool all_finite(const FrameBuffers& fb) {
   return true;
 }
 
+/// The reference renderer's frame of a scene, with depth and normals unless told otherwise.
+inline FrameBuffers reference_frame(const Scene& scene, const FrameOutputs& outputs = {.depth = true, .normals = true}) {
+  RenderSession ref(scene, backend_options("reference"));
+  FrameBuffers truth;
+  ref.render(0, truth, outputs);
+  return truth;
+}
+
 /// Pixels where the frame hit something (a finite depth).
 inline int hit_pixels(const FrameBuffers& fb) {
   int hits = 0;
@@ -55,13 +63,11 @@ inline int hit_pixels(const FrameBuffers& fb) {
 /// plus 1e-3, coverage mismatch under 0.5%, and for isosurfaces depth p99 under 0.05 voxel and
 /// normals within 2 degrees on average.
 inline void expect_as_good_as_raymarch(const Scene& scene, const FrameBuffers& fb, double step, double max_rmse) {
-  RenderSession ref(scene, backend_options("reference"));
-  FrameBuffers truth, baseline;
-  const FrameOutputs all{.depth = true, .normals = true};
-  ref.render(0, truth, all);
-  const double voxel = ref.context().geometry().voxel_size;
+  const FrameBuffers truth = reference_frame(scene);
   RenderSession rm(scene, backend_options("raymarch", {{"step", step}, {"refine", 20}}));
-  rm.render(0, baseline, all);
+  FrameBuffers baseline;
+  rm.render(0, baseline, {.depth = true, .normals = true});
+  const double voxel = rm.context().geometry().voxel_size;
   const ImageError e = compare_frames(fb, truth, voxel);
   const ImageError b = compare_frames(baseline, truth, voxel);
   EXPECT_LT(e.rmse, max_rmse) << e.to_json();

@@ -39,6 +39,7 @@ using testing::dvr_scene;
 using testing::expect_as_good_as_raymarch;
 using testing::hit_pixels;
 using testing::iso_scene;
+using testing::reference_frame;
 
 using gigavoxels::kNoAddress;
 using gigavoxels::Node;
@@ -276,9 +277,7 @@ TEST_F(GigaVoxels, AdaptiveStepSpendsSamplesWhereTheyCount) {
   // to the ray spends fewer samples where they count less: about 0.78 of that product, at a
   // coarse and a fine step (fBm 1024^3: 1.6x fewer samples at equal error).
   const Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.25, "termination_opacity": 0.999}, "shading": {"light": "headlight"})", 64);
-  RenderSession ref(sc, backend_options("reference"));
-  FrameBuffers truth;
-  ref.render(0, truth, kAll);
+  const FrameBuffers truth = reference_frame(sc);
   struct Run {
     double rmse;
     uint64_t samples;
@@ -315,9 +314,7 @@ TEST_F(GigaVoxels, AdaptiveStepStillSeesAThinSheetPastEmptySpace) {
       "transfer_function": {"points": [{"value": -0.012, "color": [0.2, 0.4, 0.9], "opacity": 0},
       {"value": 0, "color": [1, 0.4, 0.2], "opacity": 0.8}, {"value": 0.012, "color": [0.2, 0.4, 0.9], "opacity": 0}]})", 64);
   sc.dataset = store;
-  RenderSession ref(sc, backend_options("reference"));
-  FrameBuffers truth;
-  ref.render(0, truth, kAll);
+  const FrameBuffers truth = reference_frame(sc);
   for (int skip = 0; skip < 2; ++skip) {
     double rmse[2];
     for (int adaptive = 0; adaptive < 2; ++adaptive) {
@@ -499,9 +496,7 @@ TEST_F(GigaVoxels, DvrLeapsClearGroupsWhereTwoLevelsBlend) {
       {"value": -0.03, "color": [0.2, 0.4, 0.9], "opacity": 0}, {"value": 0, "color": [1, 0.4, 0.2], "opacity": 0.5},
       {"value": 0.03, "color": [0.2, 0.4, 0.9], "opacity": 0}]})", 128);
   sc.dataset = store;
-  RenderSession ref(sc, backend_options("reference"));
-  FrameBuffers truth;
-  ref.render(0, truth, kAll);
+  const FrameBuffers truth = reference_frame(sc);
   double rmse[2];
   uint64_t samples[2];
   for (int skip = 0; skip < 2; ++skip) {
@@ -608,9 +603,7 @@ TEST_F(GigaVoxels, AStepLongerThanANodeStillEntersAndSearchesEveryNodeItCrosses)
   const std::string close = R"("camera": {"eye": [0.95, -0.1, 0.9], "target": [0.5, 0.5, 0.5], "fov_degrees": 35})";
   Scene sc = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.0}], "quality": {"lod_ratio": 0.25})", 96, close);
   sc.dataset = corner;
-  RenderSession ref(sc, backend_options("reference"));
-  FrameBuffers truth;
-  ref.render(0, truth, kAll);
+  const FrameBuffers truth = reference_frame(sc);
   const int sphere_pixels = hit_pixels(truth);
   ASSERT_GT(sphere_pixels, 500);
   for (double step : {8.0, 3.0}) {
@@ -618,7 +611,7 @@ TEST_F(GigaVoxels, AStepLongerThanANodeStillEntersAndSearchesEveryNodeItCrosses)
     FrameBuffers fb;
     g.render(0, fb, kAll);
     ASSERT_TRUE(all_finite(fb));
-    const ImageError e = compare_frames(fb, truth, ref.context().geometry().voxel_size);
+    const ImageError e = compare_frames(fb, truth, g.context().geometry().voxel_size);
     std::cout << "[ measured ] step " << step << ": coverage mismatch " << e.coverage_mismatch << " of " << sphere_pixels
               << " sphere pixels, depth p99 " << e.depth_p99 << " voxels\n";
     // Only a silhouette graze shallower than the search's resolution (2^-5 voxels) may hide.
@@ -689,9 +682,7 @@ TEST_F(GigaVoxels, QuadrilinearFilteringBeatsNearestLevelAgainstASupersampledRef
   // Far enough that coarse levels are chosen, the reference supersampled 4x4 and box-filtered.
   const std::string far = R"("camera": {"eye": [3.5, -2.4, 2.9], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
   const Scene big = scene(dvr_scene(), 128, far);
-  RenderSession ref(big, backend_options("reference"));
-  FrameBuffers hi;
-  ref.render(0, hi, {});
+  const FrameBuffers hi = reference_frame(big, {});
   FrameBuffers truth(32, 32, {});
   for (int y = 0; y < 32; ++y)
     for (int x = 0; x < 32; ++x) {

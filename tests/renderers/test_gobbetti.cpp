@@ -24,6 +24,7 @@ using testing::all_finite;
 using testing::backend_options;
 using testing::dvr_scene;
 using testing::expect_as_good_as_raymarch;
+using testing::reference_frame;
 using testing::hit_pixels;
 using testing::iso_scene;
 
@@ -148,9 +149,8 @@ TEST_F(Gobbetti, AnObjectSmallerThanTheCoarseLevelsVoxelsIsStillSeen) {
   build_store(*corner, dir_->file("corner-sphere.store"), o);
   const Scene sc = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.0}], "quality": {"lod_ratio": 0.25})", 96, "64MiB",
                          "corner-sphere.store");
-  RenderSession ref(sc, backend_options("reference"));
-  FrameBuffers truth, fb;
-  ref.render(0, truth, kAll);
+  const FrameBuffers truth = reference_frame(sc);
+  FrameBuffers fb;
   RenderSession g(sc, backend_options("gobbetti"));
   g.settle(0, kAll);
   g.render(0, fb, kAll);
