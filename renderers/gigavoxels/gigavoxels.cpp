@@ -28,6 +28,7 @@
 #include <mutex>
 #include <optional>
 #include <unordered_map>
+#include <unordered_set>
 
 #include <fmt/format.h>
 
@@ -96,17 +97,21 @@ class Source {
   virtual int brick_size() const = 0;
   virtual int max_depth() const = 0;
   virtual NodeContent classify(const NodeAddress& a) const = 0;
-  /// Writes the node's (M + 2)^3 values; false when the data is not resident yet (then it has
-  /// been requested). With wait, blocks until it is.
-  virtual bool fill(const NodeAddress& a, float* out, bool wait, float priority) = 0;
+  /// What fill() did: wrote the values; or found the data missing and asked the store for it
+  /// (it arrives in a later pass); or neither (past the request budget, or it cannot be read).
+  enum class Fill { filled, requested, missing };
+  /// Writes the node's (M + 2)^3 values if the data is resident. With wait, blocks until it is.
+  virtual Fill fill(const NodeAddress& a, float* out, bool wait, float priority) = 0;
   /// Bricks shared by many nodes (instancing): an id, or 0 for a brick of its own.
   virtual uint64_t shared_id(const NodeAddress& a) const { (void)a; return 0; }
   /// Bricks computed so far, and bricks read from the store.
   virtual uint64_t produced() const { return 0; }
   virtual uint64_t loaded() const { return 0; }
-  /// How many bricks fill() may look up in the cache without waiting until the next call: one
-  /// pass's worth, no more than the cache's L1 stages (so none leaves it before it is copied).
-  virtual void set_lookup_budget(uint32_t lookups) { (void)lookups; }
+  /// How many missing bricks fill() may request from the store until the next call. Lookups
+  /// that hit are not limited: a hit is copied at once and adds nothing to the cache's L1.
+  /// Requests are: a pass's loads must fit in the L1 stages beside the last pass's, or they
+  /// push each other out before the loader copies them (and are loaded again).
+  virtual void set_request_budget(uint32_t requests) { (void)requests; }
 };
 
 /// A store's brick octree is the N = 2 tree: a node at depth d is the brick of level d.
@@ -134,20 +139,22 @@ class StoreSource final : public Source {
     else c.kind = NodeContent::brick;
     return c;
   }
-  bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
+  Fill fill(const NodeAddress& a, float* out, bool wait, float priority) override {
     const BrickKey k = store_key(a);
-    if (!wait) {
-      if (lookups_left_ == 0) return false;  // asked for again by the next pass's rays
-      --lookups_left_;
-    }
-    BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, true);
+    // Past the budget a miss is not requested: the next pass's rays ask for it again.
+    const bool may_request = requests_left_ > 0;
+    BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, may_request);
     const int64_t m = layout_.brick_size, e = m + 2;
     if (h.constant()) {  // a level's constant over a subtree that is not
       std::fill_n(out, e * e * e, h.constant_value());
       ++loaded_;
-      return true;
+      return Fill::filled;
     }
-    if (!h.resident()) return false;
+    if (!h.resident()) {
+      if (h.state() != BrickHandle::State::miss || !may_request) return Fill::missing;
+      --requests_left_;
+      return Fill::requested;
+    }
     const Stored* src = h.template voxels<Stored>();
     const int64_t es = ctx_.cache().format().edge(), skip = ctx_.cache().format().apron - 1;
     for (int64_t z = 0; z < e; ++z)
@@ -157,16 +164,16 @@ class StoreSource final : public Source {
         for (int64_t x = 0; x < e; ++x) dst[x] = float(row[x]);
       }
     ++loaded_;
-    return true;
+    return Fill::filled;
   }
   uint64_t loaded() const override { return loaded_; }
-  void set_lookup_budget(uint32_t lookups) override { lookups_left_ = lookups; }
+  void set_request_budget(uint32_t requests) override { requests_left_ = requests; }
 
  private:
   const RenderContext& ctx_;
   const StoreLayout& layout_;
   uint64_t loaded_ = 0;
-  uint32_t lookups_left_ = std::numeric_limits<uint32_t>::max();
+  uint32_t requests_left_ = std::numeric_limits<uint32_t>::max();
 };
 
 /// The store down to its finest level, then Perlin-noise amplification of it (procedural.h)
@@ -224,26 +231,26 @@ class AmplifiedSource final : public Source {
     else c.kind = NodeContent::brick;
     return c;
   }
-  bool fill(const NodeAddress& a, float* out, bool wait, float priority) override {
+  Fill fill(const NodeAddress& a, float* out, bool wait, float priority) override {
     if (a.depth > layout_.finest()) {
       std::lock_guard lock(coarse_mutex_);
       producer_->produce(a, out);
       ++produced_;
-      return true;
+      return Fill::filled;
     }
     const NodeRecord& n = ctx_.nodes().at(store_key(a));
     if (n.is_constant()) {  // a constant stored node with detail below it
       const size_t e = size_t(layout_.brick_size + 2);
       std::fill_n(out, e * e * e, n.constant);
-      return true;
+      return Fill::filled;
     }
     return stored_.fill(a, out, wait, priority);
   }
   uint64_t produced() const override { return produced_; }
   uint64_t loaded() const override { return stored_.loaded(); }
-  void set_lookup_budget(uint32_t lookups) override {
+  void set_request_budget(uint32_t requests) override {
     const uint32_t slots = ctx_.cache().pool_slots();
-    stored_.set_lookup_budget(std::min(lookups, slots - std::min(kCoarseSamplerSlots, slots / 2)));
+    stored_.set_request_budget(std::min(requests, (slots - std::min(kCoarseSamplerSlots, slots / 2)) / 2));
   }
 
  private:
@@ -264,10 +271,10 @@ class ProducerSource final : public Source {
   int brick_size() const override { return p_->brick_size(); }
   int max_depth() const override { return p_->max_depth(); }
   NodeContent classify(const NodeAddress& a) const override { return p_->classify(a); }
-  bool fill(const NodeAddress& a, float* out, bool, float) override {
+  Fill fill(const NodeAddress& a, float* out, bool, float) override {
     p_->produce(a, out);
     ++produced_;
-    return true;
+    return Fill::filled;
   }
   uint64_t produced() const override { return produced_; }
   uint64_t shared_id(const NodeAddress& a) const override { return instanced_ ? p_->brick_id(a) + 1 : 0; }
@@ -485,7 +492,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
   // --- the loader ---------------------------------------------------------------------------
   /// Writes a brick for the node if its data is available (or shared and resident already).
-  bool upload(uint32_t address, bool wait) {
+  Source::Fill upload(uint32_t address, bool wait) {
     const NodeAddress a = tree_.address_of(address);
     if (const uint64_t id = source_->shared_id(a)) {
       auto it = shared_.find(id);
@@ -493,14 +500,15 @@ class GigaVoxelsRenderer final : public Renderer {
         Node n = tree_.node(address);
         n.set_brick(it->second);
         tree_.set_node(address, n);
-        return true;
+        return Source::Fill::filled;
       }
     }
-    if (address != 0 && !tree_.brick_slot_available()) return false;  // the root's slot is always there
+    if (address != 0 && !tree_.brick_slot_available()) return Source::Fill::missing;  // the root's slot is always there
     scratch_.resize(tree_.brick_values());
-    if (!source_->fill(a, scratch_.data(), wait, float(a.depth))) return false;
+    const Source::Fill filled = source_->fill(a, scratch_.data(), wait, float(a.depth));
+    if (filled != Source::Fill::filled) return filled;
     const uint32_t slot = tree_.allocate_brick(address);
-    if (slot == gigavoxels::kNoAddress) return false;
+    if (slot == gigavoxels::kNoAddress) return Source::Fill::missing;
     std::transform(scratch_.begin(), scratch_.end(), pool_.begin() + std::ptrdiff_t(size_t(slot) * tree_.brick_values()),
                    [](float v) { return Voxel(v); });  // exact: the values came from Voxel (or are float)
     set_brick_bounds(slot);
@@ -509,7 +517,7 @@ class GigaVoxelsRenderer final : public Renderer {
       shared_[id] = slot;
     }
     ++frame_uploads_;
-    return true;
+    return Source::Fill::filled;
   }
 
   void serve_feedback() {
@@ -522,30 +530,58 @@ class GigaVoxelsRenderer final : public Renderer {
     for (uint32_t e : request_list_) tree_.mark_used(e & kAddressMask);
     tree_.end_of_feedback();
     const bool wait = allow_interrupt_;
-    source_->set_lookup_budget(ctx_.cache().pool_slots());
+    source_->set_request_budget(ctx_.cache().pool_slots() / 2);
     int subdivisions = 0, uploads = 0;
     last_pass_progress_ = 0;
+    const auto serve = [&](uint32_t address) {
+      const Source::Fill f = upload(address, wait);
+      if (f == Source::Fill::filled) ++uploads, ++last_pass_progress_;
+      if (f == Source::Fill::requested) in_transit_.push_back({address, tree_.address_of(address), frame_});
+    };
+    // First the bricks asked for in earlier passes: copied once they have arrived, asked for
+    // again until then (the cache drops requests not renewed), forgotten when their node has
+    // gone or has a brick, or after kTransitFrames.
+    std::vector<InTransit> transit;
+    transit.swap(in_transit_);
+    transit_addresses_.clear();
+    for (const InTransit& b : transit) {
+      const Node n = tree_.node(b.address);
+      if (!tree_.holds(b.address, b.node) || n.has_brick() || n.constant() || frame_ - b.since > kTransitFrames) continue;
+      transit_addresses_.insert(b.address);
+      if (uploads >= p_.upload_budget) {
+        in_transit_.push_back(b);
+        continue;
+      }
+      const Source::Fill f = upload(b.address, wait);
+      if (f == Source::Fill::filled) ++uploads, ++last_pass_progress_;
+      else in_transit_.push_back(b);
+    }
+    // Then the bricks the rays asked for, then subdivisions: a subdivision also asks for its
+    // children's bricks before any ray needs them, which only the budget the rays left may pay.
     for (uint32_t e : request_list_) {
       const uint32_t address = e & kAddressMask;
-      Node n = tree_.node(address);
-      if ((e & kWantsSubdivision) && !n.has_children() && !n.max_refined() && !n.constant()) {
-        if (subdivisions >= p_.subdivide_budget) continue;
-        const uint32_t base = tree_.subdivide(address);
-        if (base == gigavoxels::kNoAddress) continue;
-        ++subdivisions, ++frame_subdivisions_, ++last_pass_progress_;
-        for (int i = 0; i < tree_.block_nodes(); ++i) {
-          const NodeAddress a = tree_.address_of(base + uint32_t(i));
-          tree_.set_node(base + uint32_t(i), node_for(source_->classify(a), a.depth));
-        }
-        // The children's bricks come with the subdivision when the data is at hand; the rest
-        // are requested now and asked for again by the rays that need them.
-        for (int i = 0; i < tree_.block_nodes() && uploads < p_.upload_budget; ++i) {
-          const uint32_t child = base + uint32_t(i);
-          if (!tree_.node(child).constant() && upload(child, wait)) ++uploads, ++last_pass_progress_;
-        }
-      } else if ((e & kWantsBrick) && !n.has_brick() && !n.constant()) {
-        if (uploads >= p_.upload_budget) continue;
-        if (upload(address, wait)) ++uploads, ++last_pass_progress_;
+      const Node n = tree_.node(address);
+      if (!(e & kWantsBrick) || n.has_brick() || n.constant() || transit_addresses_.contains(address)) continue;
+      if (uploads >= p_.upload_budget) break;
+      serve(address);
+    }
+    for (uint32_t e : request_list_) {
+      const uint32_t address = e & kAddressMask;
+      const Node n = tree_.node(address);
+      if (!(e & kWantsSubdivision) || n.has_children() || n.max_refined() || n.constant()) continue;
+      if (subdivisions >= p_.subdivide_budget) break;
+      const uint32_t base = tree_.subdivide(address);
+      if (base == gigavoxels::kNoAddress) continue;
+      ++subdivisions, ++frame_subdivisions_, ++last_pass_progress_;
+      for (int i = 0; i < tree_.block_nodes(); ++i) {
+        const NodeAddress a = tree_.address_of(base + uint32_t(i));
+        tree_.set_node(base + uint32_t(i), node_for(source_->classify(a), a.depth));
+      }
+      // The children's bricks come with the subdivision when the data is at hand; the rest
+      // are requested now and copied when they arrive.
+      for (int i = 0; i < tree_.block_nodes() && uploads < p_.upload_budget; ++i) {
+        const uint32_t child = base + uint32_t(i);
+        if (!tree_.node(child).constant()) serve(child);
       }
     }
     const bool progress = last_pass_progress_ > 0;
@@ -1390,6 +1426,19 @@ class GigaVoxelsRenderer final : public Renderer {
   bool allow_interrupt_ = false;
   gigavoxels::Compactor compactor_;
   std::vector<uint32_t> used_list_, request_list_;
+  /// A brick the loader asked the store for, copied into the pool when it arrives whether or
+  /// not a ray asks for it again: a ray asks only for the first thing it misses, which moves
+  /// as other data arrives, and loaded bricks left waiting for the ray to ask again were pushed
+  /// out of the cache's L1 stages by later ones (on fBm 1024^3 this doubled the frames to
+  /// converge).
+  struct InTransit {
+    uint32_t address;
+    gigavoxels::NodeAddress node;  // whose brick: the address may be reused by then
+    uint64_t since;                // the frame it was first asked for
+  };
+  static constexpr uint64_t kTransitFrames = 16;
+  std::vector<InTransit> in_transit_;
+  std::unordered_set<uint32_t> transit_addresses_;
   std::vector<float> scratch_;
   std::unordered_map<uint64_t, uint32_t> shared_;  // instanced brick id -> slot
   gigavoxels::CompactionReport compaction_;

@@ -48,6 +48,13 @@ NodeAddress NodeTree::address_of(uint32_t node_address) const {
   return a;
 }
 
+bool NodeTree::holds(uint32_t node_address, const NodeAddress& a) const {
+  const uint32_t block = node_address / uint32_t(n3_);
+  if (block >= block_parent_.size()) return false;
+  if (block == 0) return node_address == 0 && a == root_address_;
+  return block_parent_[block] != kNoAddress && address_of(node_address) == a;
+}
+
 void NodeTree::begin_feedback(uint64_t frame) {
   frame_ = frame;
   block_cursor_ = brick_cursor_ = 0;
