@@ -689,8 +689,11 @@ class GigaVoxelsRenderer final : public Renderer {
       const int64_t dy = e, dz = e * e;
       const float c[8] = {float(q[0]),  float(q[1]),  float(q[dy]),      float(q[dy + 1]),
                           float(q[dz]), float(q[dz + 1]), float(q[dz + dy]), float(q[dz + dy + 1])};
-      if (gradient) *gradient = Vec3d(trilinear_gradient(c, u[0], u[1], u[2])) * (b.scale * double(r.m_));
-      return trilinear(c, u[0], u[1], u[2]);
+      if (!gradient) return trilinear(c, u[0], u[1], u[2]);
+      Vec3f g;
+      const float v = trilinear_with_gradient(c, u[0], u[1], u[2], g);
+      *gradient = Vec3d(g) * (b.scale * double(r.m_));
+      return v;
     }
 
     /// The bricks a sample at depth lambda reads: one, or (quadrilinear) the two levels around
@@ -1041,7 +1044,7 @@ class GigaVoxelsRenderer final : public Renderer {
             Vec3f col;
             float a;
             r.preintegrated_.segment(v, v, to_voxels(t_end - t_from), col, a);
-            composite(s, px, col, a, t_from, ShadingModel::Lighting{}, Vec3d(0.0));  // no gradient: ambient light
+            composite(s, px, col, a, t_from, ShadingModel::Lighting{}, Vec3d(0.0), ray);  // no gradient: ambient light
             if (s.alpha >= stop) break;
             s.start_segment(v, t_end);
           }
@@ -1323,19 +1326,29 @@ class GigaVoxelsRenderer final : public Renderer {
       px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
     }
 
-    /// The lighting at t for the field's gradient there, and the normal it used, if asked for
-    /// (a zero gradient gives no normal, and so the ambient term alone).
-    ShadingModel::Lighting lighting_at(double t, const Vec3d& gradient, const PrimaryRay& ray, Vec3d* normal = nullptr) {
-      Vec3d n(0.0);
-      if (gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0)) {
-        ++counters.gradients;
-        n = facing_normal(gradient * r.unit_gradient_to_world_, ray.world.dir);
-      }
-      if (normal) *normal = n;
+    /// Whether a sample's gradient (per unit coordinate) gives it a normal: a zero gradient
+    /// gives none, and so the ambient term alone.
+    bool has_normal(const Vec3d& gradient) const { return gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0); }
+    /// The normal of a sample's gradient (zero where it has none), facing the ray.
+    Vec3d normal_of(const Vec3d& gradient, const PrimaryRay& ray) const {
+      return has_normal(gradient) ? facing_normal(gradient * r.unit_gradient_to_world_, ray.world.dir) : Vec3d(0.0);
+    }
+    /// The lighting at t for the field's gradient there.
+    ShadingModel::Lighting lighting_at(double t, const Vec3d& gradient, const PrimaryRay& ray) {
+      const bool normal = has_normal(gradient);
+      counters.gradients += normal;
       if (!r.shading_.lit()) return {};
-      if (light_fixed && t > 0) return r.shading_.lighting_with_half(n, ray_light, ray_half, false);
+      if (light_fixed && t > 0) {
+        if (normal) {
+          // Without forming the unit normal: |n.l| and |n.h| do not depend on which way it faces.
+          const Vec3d g = gradient * r.unit_gradient_to_world_;
+          const double length2 = dot(g, g);
+          if (length2 > 0 && length2 < kInf) return r.shading_.lighting_with_half(g, 1 / std::sqrt(length2), ray_light, ray_half);
+        }
+        return r.shading_.lighting_with_half(normal_of(gradient, ray), ray_light, ray_half, false);
+      }
       double light_distance;
-      return r.shading_.lighting(n, -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);
+      return r.shading_.lighting(normal_of(gradient, ray), -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);
     }
     /// DVR: integrates the segment from the previous sample to t, where the value is v and the
     /// gradient g (zero: ambient light alone at that end), `voxels` finest voxels long. Shaded
@@ -1348,10 +1361,9 @@ class GigaVoxelsRenderer final : public Renderer {
       float a;
       r.preintegrated_.segment(s.prev_value, v, voxels, col, a);
       if (!(a > 0)) return false;
-      Vec3d normal;
-      const ShadingModel::Lighting back = lighting_at(t, g, ray, &normal);
+      const ShadingModel::Lighting back = lighting_at(t, g, ray);
       if (!s.have_prev_lighting && s.have_prev_gradient) s.prev_lighting = lighting_at(s.prev_t, s.prev_gradient, ray);
-      composite(s, px, col, a, t, s.have_prev_gradient ? back.mean(s.prev_lighting) : back, normal);
+      composite(s, px, col, a, t, s.have_prev_gradient ? back.mean(s.prev_lighting) : back, g, ray);
       s.prev_lighting = back;
       return true;
     }
@@ -1368,15 +1380,17 @@ class GigaVoxelsRenderer final : public Renderer {
       return !(light_left * cap * cap > 1) ? cap : 1 / std::sqrt(light_left);  // NaN alpha: the cap, never a NaN step
     }
     /// Composites a segment of colour c (not premultiplied) and opacity a; t is where it
-    /// counts for the depth output. The opacity gathered sets the next step (adaptive_step).
-    void composite(RayState& s, PixelResult& px, Vec3f c, double a, double t, const ShadingModel::Lighting& light, const Vec3d& n) {
+    /// counts for the depth output, and the gradient there its normal. The opacity gathered
+    /// sets the next step (adaptive_step).
+    void composite(RayState& s, PixelResult& px, Vec3f c, double a, double t, const ShadingModel::Lighting& light,
+                   const Vec3d& gradient, const PrimaryRay& ray) {
       c = r.shading_.apply(c, light);
       s.accum += Vec3d(c) * ((1 - s.alpha) * a);
       s.alpha += (1 - s.alpha) * a;
       if (r.p_.adaptive_step > 1) s.step_scale = adaptive_step_scale(s.alpha);
       if (px.depth == kInf && s.alpha >= 0.5) {
         px.depth = t;
-        if (setup.outputs.normals) px.normal = n;
+        if (setup.outputs.normals) px.normal = normal_of(gradient, ray);
       }
     }
 

@@ -31,8 +31,7 @@ class PreintegratedTf {
     const int n = std::max(size, 2);
     scale_ = double(n - 1) / (hi - lo_);
     dv_ = (hi - lo_) / double(n - 1);
-    tau_.assign(size_t(n), 0.0);
-    ctau_.assign(size_t(n), Vec3d(0.0));
+    integral_.assign(size_t(n), Integral{0.0, Vec3d(0.0)});
     point_.resize(size_t(n));
     for (size_t i = 0; i < size_t(n); ++i) {
       Vec3f c;
@@ -42,8 +41,8 @@ class PreintegratedTf {
       point_[i] = {Vec3d(c), t};
       if (i > 0) {  // trapezoids over the value axis
         const Entry& prev = point_[i - 1];
-        tau_[i] = tau_[i - 1] + 0.5 * (prev.tau + t) * dv_;
-        ctau_[i] = ctau_[i - 1] + (prev.color * prev.tau + Vec3d(c) * t) * (0.5 * dv_);
+        integral_[i].tau = integral_[i - 1].tau + 0.5 * (prev.tau + t) * dv_;
+        integral_[i].ctau = integral_[i - 1].ctau + (prev.color * prev.tau + Vec3d(c) * t) * (0.5 * dv_);
       }
     }
     // Up to the entry before the first with any extinction, segments are transparent.
@@ -72,8 +71,8 @@ class PreintegratedTf {
       tau = (b.tau - f.tau) * inv;
       ctau = (b.ctau - f.ctau) * inv;
     }
-    alpha = float(1.0 - std::exp(-std::max(0.0, tau) * length_voxels));
-    color = tau > 1e-12 ? Vec3f(ctau / tau) : Vec3f(0.0f);
+    alpha = opacity(float(std::max(0.0, tau) * length_voxels));
+    color = tau > 1e-12 ? Vec3f(ctau * (1.0 / tau)) : Vec3f(0.0f);
   }
 
  private:
@@ -88,22 +87,25 @@ class PreintegratedTf {
     const double x = (double(std::clamp(v, -kFloatMax, kFloatMax)) - lo_) * scale_;
     return x == x ? x : 0.0;
   }
+  /// The running integrals over [lo, value], side by side: a lookup reads two adjacent rows.
   struct Integral {
-    double tau;
-    Vec3d ctau;
+    double tau;  // of extinction
+    Vec3d ctau;  // of colour * extinction
   };
   /// The running integrals at table position x, continued past either end with that end's
   /// constant extinction and colour.
   Integral integral(double x) const {
-    const size_t last = tau_.size() - 1;
+    const size_t last = integral_.size() - 1;
     if (x <= 0 || x >= double(last)) {
       const size_t i = x <= 0 ? 0 : last;
       const double d = (x - double(i)) * dv_;
-      return {tau_[i] + point_[i].tau * d, ctau_[i] + point_[i].color * (point_[i].tau * d)};
+      return {integral_[i].tau + point_[i].tau * d, integral_[i].ctau + point_[i].color * (point_[i].tau * d)};
     }
     const size_t i = size_t(x);
     const double f = x - double(i);
-    return {tau_[i] + (tau_[i + 1] - tau_[i]) * f, ctau_[i] + (ctau_[i + 1] - ctau_[i]) * f};
+    const Integral& a = integral_[i];
+    const Integral& b = integral_[i + 1];
+    return {a.tau + (b.tau - a.tau) * f, a.ctau + (b.ctau - a.ctau) * f};
   }
   Entry point_at(double x) const {
     x = std::clamp(x, 0.0, double(point_.size() - 1));
@@ -112,13 +114,20 @@ class PreintegratedTf {
     return {point_[i].color + (point_[j].color - point_[i].color) * f, point_[i].tau + (point_[j].tau - point_[i].tau) * f};
   }
 
+  /// 1 - exp(-x) for x >= 0, in float (alpha is stored as one): below 2^-7, where the
+  /// difference would cancel, a series whose truncation is below float rounding; above, expf
+  /// (glibc's expm1f costs three times as much).
+  static float opacity(float x) {
+    if (x < 0x1p-7f) return x * (1 - x * (0.5f - x * (1.0f / 6)));
+    return 1 - std::exp(-x);
+  }
+
   static constexpr double kInfinity = std::numeric_limits<double>::infinity();
   static constexpr float kFloatMax = std::numeric_limits<float>::max();
   double lo_ = 0, scale_ = 0;
   double dv_ = 0;  // value per table entry
   double clear_up_to_ = -kInfinity;  // a segment whose values all lie at or below this is transparent
-  std::vector<double> tau_;   // integral of extinction over [lo, value]
-  std::vector<Vec3d> ctau_;   // integral of colour * extinction
+  std::vector<Integral> integral_;
   std::vector<Entry> point_;
 };
 
