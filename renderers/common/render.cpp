@@ -115,6 +115,13 @@ BackendParams resolve_params(const BackendInfo& info, const Scene& scene, const 
     throw Error(Errc::format, e.message()).with_file(scene.file).with_field(e.field());
   }
 }
+
+/// The normal methods a back end computes, as a scene names them.
+std::string normal_methods(const BackendInfo& info) {
+  std::string names;
+  for (NormalMethod m : info.normals) names += (names.empty() ? "" : ", ") + std::string(to_string(m));
+  return names;
+}
 }  // namespace
 
 RenderSession::RenderSession(const Scene& scene, const Options& options)
@@ -131,6 +138,11 @@ RenderSession::RenderSession(const Scene& scene, const Options& options)
     throw Error(Errc::unsupported, fmt::format("{} casts no shadow rays", entry_->info.name))
         .with_file(scene_.file)
         .with_field("shading.shadows");
+  if (std::find(entry_->info.normals.begin(), entry_->info.normals.end(), scene_.shading.normals) == entry_->info.normals.end())
+    throw Error(Errc::unsupported, fmt::format("{} does not compute {} normals (it computes: {})", entry_->info.name,
+                                               to_string(scene_.shading.normals), normal_methods(entry_->info)))
+        .with_file(scene_.file)
+        .with_field("shading.normals");
   store_ = std::make_unique<BrickStore>(scene_.dataset);
   normalize_values(scene_, store_->manifest().min_value, store_->manifest().max_value);
   build();

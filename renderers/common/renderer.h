@@ -46,6 +46,9 @@ struct BackendInfo {
   std::vector<DataKind> kinds;
   std::vector<RenderMode> modes;
   bool shadows = false;  ///< casts shadow rays (scenes with `shading.shadows` need it)
+  /// How it can compute normals (`shading.normals`); the exact gradient of the interpolant
+  /// alone unless it says more. A scene asking for another is refused, not given other normals.
+  std::vector<NormalMethod> normals = {NormalMethod::analytic};
   std::vector<BackendParam> params;
   /// The parameter `brickyard bench` sweeps, and its default sweep from fast to accurate.
   std::string quality_param;

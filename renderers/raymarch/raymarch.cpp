@@ -252,6 +252,7 @@ BackendEntry raymarch_backend() {
   e.info.kinds = {DataKind::structured};
   e.info.modes = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
   e.info.shadows = true;
+  e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
   e.info.params = {
       {"step", 0.5, 1e-3, 16.0, "sampling step in voxels (times the scene's quality.step_factor; DVR/MIP: divided by sampling_rate)"},
       {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing between two samples"},

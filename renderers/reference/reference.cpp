@@ -363,6 +363,7 @@ BackendEntry reference_backend() {
   e.info.kinds = {DataKind::structured};
   e.info.modes = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
   e.info.shadows = true;
+  e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
   e.info.params = {
       {"step", 0.125, 1e-3, 1.0, "DVR sampling step in voxels (divided by the scene's sampling_rate); analytic mode's search step"},
       {"analytic", 0, 0, 1, "1: render the procedural field the store was made from instead of its voxels"},

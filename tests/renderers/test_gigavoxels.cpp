@@ -706,6 +706,33 @@ TEST_F(GigaVoxels, ABrickTheLoaderAskedForIsCopiedWhenItArrivesAndReadOnce) {
   EXPECT_LE(frames, int(bricks / budget * 2) + 12) << bricks << " bricks";
 }
 
+TEST_F(GigaVoxels, DifferenceNormalsAreRefusedByNameNotReplaced) {
+  // gigavoxels and gobbetti shade with the exact gradient of the interpolant. A scene asking
+  // for difference normals is refused, naming the key, rather than rendered with other normals
+  // (whose error against the reference would be blamed on sampling); raymarch and the reference
+  // compute all three.
+  for (const std::string method : {"central", "forward"}) {
+    const Scene sc = scene(dvr_scene() + R"(, "shading": {"light": "headlight", "normals": ")" + method + R"("})", 16);
+    for (const std::string backend : {"gigavoxels", "gobbetti"}) {
+      try {
+        RenderSession session(sc, backend_options(backend));
+        ADD_FAILURE() << backend << " accepted " << method << " normals";
+      } catch (const Error& e) {
+        EXPECT_EQ(e.code(), Errc::unsupported) << e.what();
+        EXPECT_EQ(e.field(), "shading.normals") << e.what();
+        EXPECT_NE(std::string(e.what()).find(backend + " does not compute " + method + " normals"), std::string::npos) << e.what();
+      }
+    }
+    for (const std::string backend : {"raymarch", "reference"}) {
+      RenderSession session(sc, backend_options(backend));
+      FrameBuffers fb;
+      session.render(0, fb, kAll);
+      EXPECT_TRUE(all_finite(fb)) << backend;
+    }
+  }
+  RenderSession analytic(scene(dvr_scene() + R"(, "shading": {"light": "headlight", "normals": "analytic"})", 16), backend_options("gigavoxels"));
+}
+
 TEST_F(GigaVoxels, QuadrilinearFilteringBeatsNearestLevelAgainstASupersampledReference) {
   // Far enough that coarse levels are chosen, the reference supersampled 4x4 and box-filtered.
   const std::string far = R"("camera": {"eye": [3.5, -2.4, 2.9], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
