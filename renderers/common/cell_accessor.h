@@ -128,18 +128,22 @@ inline Vec3<V> trilinear_gradient(const V c[8], V ux, V uy, V uz) {
 }
 
 /// @brief trilinear() and trilinear_gradient() together, sharing their interpolations
-/// (about half the arithmetic of the two apart; equal to them up to rounding).
+/// (about half the arithmetic of the two apart). The y and z derivatives are differences of
+/// interpolated values, so the corners are taken relative to c[0] first: their rounding then
+/// scales with the cell's variation, as trilinear_gradient()'s does, not with its values.
 template <typename V>
 inline V trilinear_with_gradient(const V c[8], V ux, V uy, V uz, Vec3<V>& g) {
-  const V x00 = c[0] + (c[1] - c[0]) * ux, x10 = c[2] + (c[3] - c[2]) * ux;
-  const V x01 = c[4] + (c[5] - c[4]) * ux, x11 = c[6] + (c[7] - c[6]) * ux;
-  const V d0 = (c[1] - c[0]) + ((c[3] - c[2]) - (c[1] - c[0])) * uy;
-  const V d1 = (c[5] - c[4]) + ((c[7] - c[6]) - (c[5] - c[4])) * uy;
+  const V c1 = c[1] - c[0], c2 = c[2] - c[0], c3 = c[3] - c[0];
+  const V c4 = c[4] - c[0], c5 = c[5] - c[0], c6 = c[6] - c[0], c7 = c[7] - c[0];
+  const V x00 = c1 * ux, x10 = c2 + (c3 - c2) * ux;
+  const V x01 = c4 + (c5 - c4) * ux, x11 = c6 + (c7 - c6) * ux;
+  const V d0 = c1 + ((c3 - c2) - c1) * uy;
+  const V d1 = (c5 - c4) + ((c7 - c6) - (c5 - c4)) * uy;
   const V y0 = x00 + (x10 - x00) * uy, y1 = x01 + (x11 - x01) * uy;
   g.x = d0 + (d1 - d0) * uz;
   g.y = (x10 - x00) + ((x11 - x01) - (x10 - x00)) * uz;
   g.z = y1 - y0;
-  return y0 + (y1 - y0) * uz;
+  return c[0] + (y0 + (y1 - y0) * uz);
 }
 
 /// @brief Continuous sampling of a level at voxel coordinates (clamped into the volume).

@@ -77,7 +77,7 @@ class ShadingModel {
   }
   /// @brief lighting_with_half() for the normal g * inv_length (inv_length = 1 / |g|), without
   /// forming it (two-sided: which way it faces does not matter).
-  Lighting lighting_with_half(const Vec3d& g, double inv_length, const Vec3d& light, const Vec3d& half) const {
+  Lighting lighting_of_gradient(const Vec3d& g, double inv_length, const Vec3d& light, const Vec3d& half) const {
     return lighting_of(std::fabs(dot(g, light)) * inv_length, std::fabs(dot(g, half)) * inv_length);
   }
   Vec3f apply(const Vec3f& base, const Lighting& l) const {

@@ -199,8 +199,9 @@ struct CompactionReport {
 /// Steps 2 and 3, stream compaction: per fixed chunk of packets the kept counts, an exclusive
 /// prefix sum over the chunks, then a parallel scatter that preserves slot order.
 ///
-/// The output may still hold a value several times (packets far apart that used the same node);
-/// the loader's marks are idempotent, so removing those would cost a hash or a sort for nothing.
+/// The output may still hold a value several times (packets far apart that used the same node):
+/// the loader's marks are idempotent, and it keeps the bricks it asked for in a set of its own
+/// (one request per node), so removing those here would cost a hash or a sort for nothing.
 /// The result does not depend on the thread count. Not thread-safe: one compaction at a time.
 class Compactor {
  public:

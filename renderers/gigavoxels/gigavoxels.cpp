@@ -97,9 +97,10 @@ class Source {
   virtual int brick_size() const = 0;
   virtual int max_depth() const = 0;
   virtual NodeContent classify(const NodeAddress& a) const = 0;
-  /// What fill() did: wrote the values; or found the data missing and asked the store for it
-  /// (it arrives in a later pass); or neither (past the request budget, or it cannot be read).
-  enum class Fill { filled, requested, missing };
+  /// What fill() did: wrote the values; found the data missing and asked the store for it (or
+  /// joined a request already made: it arrives in a later pass); found it missing past the
+  /// request budget (asked for in a later pass); or found that it cannot be read.
+  enum class Fill { filled, requested, missing, failed };
   /// Writes the node's (M + 2)^3 values if the data is resident. With wait, blocks until it is.
   virtual Fill fill(const NodeAddress& a, float* out, bool wait, float priority) = 0;
   /// Bricks shared by many nodes (instancing): an id, or 0 for a brick of its own.
@@ -107,10 +108,11 @@ class Source {
   /// Bricks computed so far, and bricks read from the store.
   virtual uint64_t produced() const { return 0; }
   virtual uint64_t loaded() const { return 0; }
-  /// How many missing bricks fill() may request from the store until the next call. Lookups
-  /// that hit are not limited: a hit is copied at once and adds nothing to the cache's L1.
-  /// Requests are: a pass's loads must fit in the L1 stages beside the last pass's, or they
-  /// push each other out before the loader copies them (and are loaded again).
+  /// How many missing bricks fill() may ask the store for until the next call, new requests and
+  /// renewals alike: it bounds the loads outstanding. Lookups that hit are not limited: a hit
+  /// is copied at once and adds nothing to the cache's L1. Requests are, to at most half the
+  /// L1 stages (at least one): a pass's loads must fit beside the last pass's until both are
+  /// copied, or they push each other out first (and are loaded again).
   virtual void set_request_budget(uint32_t requests) { (void)requests; }
 };
 
@@ -141,7 +143,7 @@ class StoreSource final : public Source {
   }
   Fill fill(const NodeAddress& a, float* out, bool wait, float priority) override {
     const BrickKey k = store_key(a);
-    // Past the budget a miss is not requested: the next pass's rays ask for it again.
+    // Past the budget a miss is not requested: the loader or the rays ask for it again later.
     const bool may_request = requests_left_ > 0;
     BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, may_request);
     const int64_t m = layout_.brick_size, e = m + 2;
@@ -151,7 +153,8 @@ class StoreSource final : public Source {
       return Fill::filled;
     }
     if (!h.resident()) {
-      if (h.state() != BrickHandle::State::miss || !may_request) return Fill::missing;
+      if (h.failed()) return Fill::failed;
+      if (!may_request) return Fill::missing;
       --requests_left_;
       return Fill::requested;
     }
@@ -167,7 +170,7 @@ class StoreSource final : public Source {
     return Fill::filled;
   }
   uint64_t loaded() const override { return loaded_; }
-  void set_request_budget(uint32_t requests) override { requests_left_ = requests; }
+  void set_request_budget(uint32_t requests) override { requests_left_ = std::min(requests, std::max(1u, ctx_.cache().pool_slots() / 2)); }
 
  private:
   const RenderContext& ctx_;
@@ -249,8 +252,8 @@ class AmplifiedSource final : public Source {
   uint64_t produced() const override { return produced_; }
   uint64_t loaded() const override { return stored_.loaded(); }
   void set_request_budget(uint32_t requests) override {
-    const uint32_t slots = ctx_.cache().pool_slots();
-    stored_.set_request_budget(std::min(requests, (slots - std::min(kCoarseSamplerSlots, slots / 2)) / 2));
+    const uint32_t slots = ctx_.cache().pool_slots();  // the coarse sampler's slots are not the loader's
+    stored_.set_request_budget(std::min(requests, std::max(1u, (slots - std::min(kCoarseSamplerSlots, slots / 2)) / 2)));
   }
 
  private:
@@ -528,33 +531,39 @@ class GigaVoxelsRenderer final : public Renderer {
     last_pass_requests_ = request_list_.size();
     for (uint32_t e : used_list_) tree_.mark_used(e & kAddressMask);
     for (uint32_t e : request_list_) tree_.mark_used(e & kAddressMask);
-    tree_.end_of_feedback();
     const bool wait = allow_interrupt_;
-    source_->set_request_budget(ctx_.cache().pool_slots() / 2);
+    // The bricks asked for in earlier passes stay the loader's while their node is in the tree
+    // without one, and count as used, so that no subdivision takes their block once they are
+    // copied. A blocking pass (exact mode) forgets them: it fetches what its rays ask for.
+    if (wait) in_transit_.clear();
+    std::erase_if(in_transit_, [&](const InTransit& b) {
+      const Node n = tree_.node(b.address);
+      return !tree_.holds(b.address, b.node) || n.has_brick() || n.constant() || frame_ - b.since > kTransitFrames;
+    });
+    for (const InTransit& b : in_transit_) tree_.mark_used(b.address);
+    tree_.end_of_feedback();
+    source_->set_request_budget(uint32_t(p_.upload_budget));
     int subdivisions = 0, uploads = 0;
     last_pass_progress_ = 0;
+    transit_addresses_.clear();
+    for (const InTransit& b : in_transit_) transit_addresses_.insert(b.address);
+    // Uploads a node's brick if it is at hand; one asked for becomes the loader's until it
+    // arrives (once: the compacted lists may name a node more than once).
     const auto serve = [&](uint32_t address) {
       const Source::Fill f = upload(address, wait);
       if (f == Source::Fill::filled) ++uploads, ++last_pass_progress_;
-      if (f == Source::Fill::requested) in_transit_.push_back({address, tree_.address_of(address), frame_});
+      if (f == Source::Fill::requested && transit_addresses_.insert(address).second)
+        in_transit_.push_back({address, tree_.address_of(address), frame_});
+      return f;
     };
-    // First the bricks asked for in earlier passes: copied once they have arrived, asked for
-    // again until then (the cache drops requests not renewed), forgotten when their node has
-    // gone or has a brick, or after kTransitFrames.
+    // First the loader's: copied once arrived, asked for again until then while the budget
+    // allows (the cache drops a request not renewed; a later pass asks again), dropped when
+    // they cannot be read.
     std::vector<InTransit> transit;
     transit.swap(in_transit_);
-    transit_addresses_.clear();
     for (const InTransit& b : transit) {
-      const Node n = tree_.node(b.address);
-      if (!tree_.holds(b.address, b.node) || n.has_brick() || n.constant() || frame_ - b.since > kTransitFrames) continue;
-      transit_addresses_.insert(b.address);
-      if (uploads >= p_.upload_budget) {
-        in_transit_.push_back(b);
-        continue;
-      }
-      const Source::Fill f = upload(b.address, wait);
-      if (f == Source::Fill::filled) ++uploads, ++last_pass_progress_;
-      else in_transit_.push_back(b);
+      const Source::Fill f = uploads < p_.upload_budget ? serve(b.address) : Source::Fill::missing;
+      if (f == Source::Fill::requested || f == Source::Fill::missing) in_transit_.push_back(b);
     }
     // Then the bricks the rays asked for, then subdivisions: a subdivision also asks for its
     // children's bricks before any ray needs them, which only the budget the rays left may pay.
@@ -584,7 +593,8 @@ class GigaVoxelsRenderer final : public Renderer {
         if (!tree_.node(child).constant()) serve(child);
       }
     }
-    const bool progress = last_pass_progress_ > 0;
+    // Waiting on loads is not a stall: they arrive in a later frame.
+    const bool progress = last_pass_progress_ > 0 || !in_transit_.empty();
     if (passes_ == 1) stalled_frames_ = progress || request_list_.empty() ? 0 : stalled_frames_ + 1;
   }
 
@@ -1343,7 +1353,7 @@ class GigaVoxelsRenderer final : public Renderer {
           // Without forming the unit normal: |n.l| and |n.h| do not depend on which way it faces.
           const Vec3d g = gradient * r.unit_gradient_to_world_;
           const double length2 = dot(g, g);
-          if (length2 > 0 && length2 < kInf) return r.shading_.lighting_with_half(g, 1 / std::sqrt(length2), ray_light, ray_half);
+          if (length2 > 0 && length2 < kInf) return r.shading_.lighting_of_gradient(g, 1 / std::sqrt(length2), ray_light, ray_half);
         }
         return r.shading_.lighting_with_half(normal_of(gradient, ray), ray_light, ray_half, false);
       }
@@ -1443,13 +1453,15 @@ class GigaVoxelsRenderer final : public Renderer {
   /// A brick the loader asked the store for, copied into the pool when it arrives whether or
   /// not a ray asks for it again: a ray asks only for the first thing it misses, which moves
   /// as other data arrives, and loaded bricks left waiting for the ray to ask again were pushed
-  /// out of the cache's L1 stages by later ones (on fBm 1024^3 this doubled the frames to
-  /// converge).
+  /// out of the cache's L1 stages by later ones (on fBm 1024^3 at 256x256, a cold start took
+  /// 463 frames to converge; 66 with this).
   struct InTransit {
     uint32_t address;
     gigavoxels::NodeAddress node;  // whose brick: the address may be reused by then
     uint64_t since;                // the frame it was first asked for
   };
+  /// A load normally arrives the next frame (the cache's p99 latency was 23-88 ms against
+  /// frames of 0.1-1 s); one this late is left to the rays to ask for again.
   static constexpr uint64_t kTransitFrames = 16;
   std::vector<InTransit> in_transit_;
   std::unordered_set<uint32_t> transit_addresses_;
@@ -1501,10 +1513,10 @@ BackendEntry gigavoxels_backend() {
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
-  // The loader looks up at most the staging slots' worth of bricks a pass (StoreSource's
-  // lookup budget), so none it asked for leaves the cache's L1 before it is copied; the
-  // amplified store's coarse sampler reads through L1 too, beside them; the sponge reads no
-  // stored brick. A pool sized by hand (brick_slots) leaves the cache the whole budget.
+  // The loader has at most half the staging slots' worth of bricks asked for at a time
+  // (StoreSource's request budget), so none it asked for leaves the cache's L1 before it is
+  // copied; the amplified store's coarse sampler reads through L1 too, beside them; the sponge
+  // reads no stored brick. A pool sized by hand (brick_slots) leaves the cache the whole budget.
   e.info.l1_staging_slots = [](const BackendParams& p) -> uint32_t {
     if (p["brick_slots"] != 0) return 0;
     if (p["source"] == 1) return 1;

@@ -49,10 +49,18 @@ NodeAddress NodeTree::address_of(uint32_t node_address) const {
 }
 
 bool NodeTree::holds(uint32_t node_address, const NodeAddress& a) const {
-  const uint32_t block = node_address / uint32_t(n3_);
-  if (block >= block_parent_.size()) return false;
-  if (block == 0) return node_address == 0 && a == root_address_;
-  return block_parent_[block] != kNoAddress && address_of(node_address) == a;
+  const uint32_t first = node_address / uint32_t(n3_);
+  if (first >= block_parent_.size()) return false;
+  if (first == 0) return node_address == 0 && a == root_address_;
+  if (address_of(node_address) != a) return false;
+  // Up to the root, each block still its parent's children: a block whose parent's block was
+  // taken is not freed with it, and keeps its parent and base until it is taken itself.
+  for (uint32_t block = first; block != 0;) {
+    const uint32_t parent = block_parent_[block];
+    if (parent == kNoAddress || !nodes_[parent].has_children() || nodes_[parent].child_block() - 1 != block) return false;
+    block = parent / uint32_t(n3_);
+  }
+  return true;
 }
 
 void NodeTree::begin_feedback(uint64_t frame) {

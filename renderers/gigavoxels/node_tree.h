@@ -105,8 +105,8 @@ class NodeTree {
   /// @brief Sets the root's content (block 0, node 0). Call once before rendering.
   void set_root(Node root, const NodeAddress& address);
   NodeAddress address_of(uint32_t node_address) const;
-  /// @brief Whether the node at node_address is still in the tree and is the node at `a` (a
-  /// block's addresses are reused once it is evicted).
+  /// @brief Whether the node at node_address is in the tree (reachable from the root) and is
+  /// the node at `a` (a block's addresses are reused once it is evicted).
   bool holds(uint32_t node_address, const NodeAddress& a) const;
   /// @brief Gives the node a block of children (taken from the least recently used block not
   /// used this frame) and returns it, or kNoAddress when none can be taken. The caller fills

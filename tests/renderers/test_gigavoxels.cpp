@@ -43,6 +43,7 @@ using testing::reference_frame;
 
 using gigavoxels::kNoAddress;
 using gigavoxels::Node;
+using gigavoxels::NodeAddress;
 using gigavoxels::NodeTree;
 
 TEST(GigaVoxelsNodeTree, LruNeverEvictsWhatTheFrameUsedNorTheRoot) {
@@ -97,6 +98,37 @@ TEST(GigaVoxelsNodeTree, LruNeverEvictsWhatTheFrameUsedNorTheRoot) {
   for (int i = 0; i < 4; ++i) tree.subdivide(a + 6);
   EXPECT_FALSE(tree.node(a + 3).has_children());
   EXPECT_TRUE(tree.node(0).has_brick());
+}
+
+TEST(GigaVoxelsNodeTree, HoldsOnlyNodesReachableFromTheRootAtTheirAddress) {
+  // The loader keeps the tree address of a node whose brick it asked for; by the time the brick
+  // arrives the block may hold other nodes, or be cut off from the root with its parent's.
+  NodeTree tree(2, 4, 4, 8);
+  tree.set_root(Node::make_data(false), {});
+  tree.begin_feedback(1);
+  const uint32_t a = tree.subdivide(0);
+  for (int i = 0; i < 8; ++i) tree.set_node(a + uint32_t(i), Node::make_data(false));
+  const uint32_t b = tree.subdivide(a + 3);
+  for (int i = 0; i < 8; ++i) tree.set_node(b + uint32_t(i), Node::make_data(false));
+  tree.end_of_feedback();
+  const NodeAddress at_b1 = tree.address_of(b + 1);
+  EXPECT_TRUE(tree.holds(0, NodeAddress{}));
+  EXPECT_TRUE(tree.holds(a + 3, tree.address_of(a + 3)));
+  EXPECT_TRUE(tree.holds(b + 1, at_b1));
+  EXPECT_FALSE(tree.holds(b + 1, tree.address_of(b + 2)));  // another node's address
+  EXPECT_FALSE(tree.holds(1, NodeAddress{}));  // the root's block holds the root alone
+
+  // The root's children move to a fresh block: the old one and its child block stay allocated
+  // (with their parents and bases) but no descent reaches them.
+  tree.begin_feedback(2);
+  tree.end_of_feedback();
+  const uint32_t c = tree.subdivide(0);
+  ASSERT_NE(c / 8, a / 8);
+  ASSERT_NE(c / 8, b / 8);
+  for (int i = 0; i < 8; ++i) tree.set_node(c + uint32_t(i), Node::make_data(false));
+  EXPECT_TRUE(tree.holds(c + 3, tree.address_of(c + 3)));
+  EXPECT_FALSE(tree.holds(a + 3, tree.address_of(a + 3)));
+  EXPECT_FALSE(tree.holds(b + 1, at_b1));
 }
 
 TEST(GigaVoxelsNodeTree, AFreeSlotIsTakenBeforeOneFilledLastFrame) {
@@ -704,6 +736,25 @@ TEST_F(GigaVoxels, ABrickTheLoaderAskedForIsCopiedWhenItArrivesAndReadOnce) {
   EXPECT_EQ(cs.l2.hits, 0u) << "bricks loaded into L1 again";
   EXPECT_EQ(cs.l1.inserts, cs.l3.hits);  // l3.hits: bricks read from the store
   EXPECT_LE(frames, int(bricks / budget * 2) + 12) << bricks << " bricks";
+}
+
+TEST_F(GigaVoxels, AnL1OfAFewBricksStillLoadsTheVolume) {
+  // The cache's L1 stages a quarter of its budget, at least one slot; the loader may then have
+  // one brick asked for at a time (half of one slot rounds to none, which would load nothing
+  // and call the empty image converged).
+  Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.5})", 32);
+  RenderSession probe(sc, backend_options("gigavoxels"));
+  sc.cache.l1_bytes = 6 * probe.cache().format().bytes();
+  RenderSession approx(sc, backend_options("gigavoxels"));
+  ASSERT_EQ(approx.cache().pool_slots(), 1u);
+  FrameBuffers fb;
+  FrameStats st;
+  for (int frame = 0; frame < 12; ++frame) {
+    st = approx.render(0, fb, kAll);
+    approx.cache().wait_idle();
+  }
+  EXPECT_GE(st.backend_value("brick_slots"), 4);
+  EXPECT_EQ(st.backend_value("bricks_in_use"), st.backend_value("brick_slots")) << "the pool fills";
 }
 
 TEST_F(GigaVoxels, DifferenceNormalsAreRefusedByNameNotReplaced) {
