@@ -54,13 +54,15 @@ bool NodeTree::holds(uint32_t node_address, const NodeAddress& a) const {
   if (first == 0) return node_address == 0 && a == root_address_;
   if (address_of(node_address) != a) return false;
   // Up to the root, each block still its parent's children: a block whose parent's block was
-  // taken is not freed with it, and keeps its parent and base until it is taken itself.
-  for (uint32_t block = first; block != 0;) {
+  // taken is not freed with it, and keeps its parent and base until it is taken itself. The
+  // chain is a.depth - root depth blocks long; a longer one is not this node's.
+  uint32_t block = first;
+  for (int steps = a.depth - root_address_.depth; block != 0 && steps > 0; --steps) {
     const uint32_t parent = block_parent_[block];
     if (parent == kNoAddress || !nodes_[parent].has_children() || nodes_[parent].child_block() - 1 != block) return false;
     block = parent / uint32_t(n3_);
   }
-  return true;
+  return block == 0;
 }
 
 void NodeTree::begin_feedback(uint64_t frame) {

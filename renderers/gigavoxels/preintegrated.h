@@ -75,6 +75,14 @@ class PreintegratedTf {
     color = tau > 1e-12 ? Vec3f(ctau * (1.0 / tau)) : Vec3f(0.0f);
   }
 
+  /// @brief 1 - exp(-x) for x >= 0, in float (alpha is stored as one): below 1/8, where the
+  /// difference would cancel, the series to x^5 (truncation below 2^-24 of the result); above,
+  /// 1 - expf(-x), within about 2^-21 of it (glibc's expm1f costs three times as much).
+  static float opacity(float x) {
+    if (x < 0.125f) return x * (1 - x * (0.5f - x * (1.0f / 6 - x * (1.0f / 24 - x * (1.0f / 120)))));
+    return 1 - std::exp(-x);
+  }
+
  private:
   struct Entry {
     Vec3d color;
@@ -112,14 +120,6 @@ class PreintegratedTf {
     const size_t i = std::min(size_t(x), point_.size() - 1), j = std::min(i + 1, point_.size() - 1);
     const double f = x - double(i);
     return {point_[i].color + (point_[j].color - point_[i].color) * f, point_[i].tau + (point_[j].tau - point_[i].tau) * f};
-  }
-
-  /// 1 - exp(-x) for x >= 0, in float (alpha is stored as one): below 1/8, where the
-  /// difference would cancel, the series to x^5 (truncation below 2^-24 of the result); above,
-  /// 1 - expf(-x), within about 2^-21 of it (glibc's expm1f costs three times as much).
-  static float opacity(float x) {
-    if (x < 0.125f) return x * (1 - x * (0.5f - x * (1.0f / 6 - x * (1.0f / 24 - x * (1.0f / 120)))));
-    return 1 - std::exp(-x);
   }
 
   static constexpr double kInfinity = std::numeric_limits<double>::infinity();

@@ -129,6 +129,27 @@ TEST(GigaVoxelsNodeTree, HoldsOnlyNodesReachableFromTheRootAtTheirAddress) {
   EXPECT_TRUE(tree.holds(c + 3, tree.address_of(c + 3)));
   EXPECT_FALSE(tree.holds(a + 3, tree.address_of(a + 3)));
   EXPECT_FALSE(tree.holds(b + 1, at_b1));
+
+  // The loader's case: the parent's block is taken by a subdivision, its nodes cleared, and the
+  // child block is cut off.
+  NodeTree t2(2, 4, 4, 8);
+  t2.set_root(Node::make_data(false), {});
+  t2.begin_feedback(1);
+  const uint32_t a2 = t2.subdivide(0);
+  for (int i = 0; i < 8; ++i) t2.set_node(a2 + uint32_t(i), Node::make_data(false));
+  const uint32_t b2 = t2.subdivide(a2 + 3);
+  for (int i = 0; i < 8; ++i) t2.set_node(b2 + uint32_t(i), Node::make_data(false));
+  t2.end_of_feedback();
+  const NodeAddress at_b2 = t2.address_of(b2 + 1);
+  t2.begin_feedback(2);
+  t2.end_of_feedback();
+  const uint32_t free_block = t2.subdivide(b2);  // the free block first
+  for (int i = 0; i < 8; ++i) t2.set_node(free_block + uint32_t(i), Node::make_data(false));
+  const uint32_t taken = t2.subdivide(b2 + 2);  // then the least recently used: a2's
+  ASSERT_EQ(taken / 8, a2 / 8);
+  for (int i = 0; i < 8; ++i) t2.set_node(taken + uint32_t(i), Node::make_data(false));
+  EXPECT_FALSE(t2.node(0).has_children());
+  EXPECT_FALSE(t2.holds(b2 + 1, at_b2));
 }
 
 TEST(GigaVoxelsNodeTree, AFreeSlotIsTakenBeforeOneFilledLastFrame) {
@@ -271,6 +292,29 @@ class GigaVoxels : public ::testing::Test {
 testing::TempDir* GigaVoxels::dir_ = nullptr;
 
 const FrameOutputs kAll{.depth = true, .normals = true};
+
+TEST(GigaVoxelsPreintegratedTf, OpacityIsOneMinusExpInFloatAcrossTheSeriesBoundary) {
+  // Alpha in float: a series below 1/8 (where 1 - exp(-x) cancels), expf above. Dense around
+  // the boundary and where the old one lay (2^-7), against double expm1.
+  double worst_series = 0, worst_exp = 0;
+  std::vector<double> xs = {0.0, 1e-30, 1e-12, 1e-6};
+  for (int i = 0; i <= 4000; ++i) xs.push_back(std::exp2(-14.0 + 15.0 * i / 4000));  // 2^-14 .. 2
+  for (int i = -200; i <= 200; ++i) xs.push_back(0.125 + i * 1e-6), xs.push_back(0x1p-7 + i * 1e-8);
+  for (double x : {4.0, 16.0, 100.0, 1e6}) xs.push_back(x);
+  for (const double xd : xs) {
+    const float x = float(xd);
+    const double want = -std::expm1(-double(x));
+    const double got = gigavoxels::PreintegratedTf::opacity(x);
+    if (want == 0) {
+      ASSERT_EQ(got, 0.0) << x;
+      continue;
+    }
+    const double rel = std::fabs(got - want) / want;
+    (x < 0.125f ? worst_series : worst_exp) = std::max(x < 0.125f ? worst_series : worst_exp, rel);
+    ASSERT_LE(rel, x < 0.125f ? 0x1p-22 : 0x1p-20) << "x = " << x;
+  }
+  std::cout << "[ measured ] opacity(): worst relative error " << worst_series << " below 1/8, " << worst_exp << " above\n";
+}
 
 TEST_F(GigaVoxels, ExactModeMatchesTheReferenceInOneFrame) {
   // lod_ratio 0.25: every ray reaches the finest level, so what remains is the sampling error.
@@ -753,7 +797,6 @@ TEST_F(GigaVoxels, AnL1OfAFewBricksStillLoadsTheVolume) {
     st = approx.render(0, fb, kAll);
     approx.cache().wait_idle();
   }
-  EXPECT_GE(st.backend_value("brick_slots"), 4);
   EXPECT_EQ(st.backend_value("bricks_in_use"), st.backend_value("brick_slots")) << "the pool fills";
 }
 

@@ -283,8 +283,9 @@ TEST(Cubic, TrilinearCubicMatchesDirectInterpolation) {
 
 TEST(Trilinear, WithGradientIsTrilinearAndItsGradientInFloatOnLargeValues) {
   // In float on u16-sized values with small differences between corners (a nearly flat cell
-  // far from zero): the fused form's value and every gradient component stay within float
-  // rounding of the cell's variation, as the separate forms' do, against a double truth.
+  // far from zero): every gradient component of the fused form stays within float rounding of
+  // the cell's variation, as the separate form's does, against a double truth; the value
+  // within float rounding of its size.
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> unit(0.0, 1.0), delta(-4.0, 4.0);
   double worst = 0;
@@ -299,9 +300,9 @@ TEST(Trilinear, WithGradientIsTrilinearAndItsGradientInFloatOnLargeValues) {
     const double want = trilinear(cd, double(ux), double(uy), double(uz));
     const Vec3d want_g = trilinear_gradient(cd, double(ux), double(uy), double(uz));
     const Vec3f sep_g = trilinear_gradient(c, ux, uy, uz);
-    ASSERT_NEAR(v, want, 0x1p-23 * std::fabs(want) + 1e-6) << "trial " << trial;
     double spread = 0;
     for (int n = 0; n < 8; ++n) spread = std::max(spread, std::fabs(cd[n] - cd[0]));
+    ASSERT_NEAR(v, want, 4 * 0x1p-24 * (std::fabs(want) + spread)) << "trial " << trial;
     for (int a = 0; a < 3; ++a) {
       const double err = std::fabs(double(g[a]) - want_g[a]);
       ASSERT_LE(err, 1e-5 * (spread + 1e-30)) << "trial " << trial << " axis " << a << ": " << g[a] << " against " << want_g[a];
@@ -811,6 +812,30 @@ TEST(ShadingModel, LightingIsAveragedBeforeItIsApplied) {
     for (int c = 0; c < 3; ++c) {
       ASSERT_NEAR(mean[c], 0.5f * (s0[c] + s1[c]), 1e-6f) << trial;
       ASSERT_FLOAT_EQ(m.shade(base, n0, view, light, true)[c], base[c] * sh.ambient) << trial;
+    }
+  }
+}
+
+TEST(ShadingModel, LightingOfAGradientIsTheLightingOfItsUnitNormalEitherWay) {
+  // gigavoxels lights a sample from its gradient without forming the unit normal: |n.l| and
+  // |n.h| do not depend on the normal's length, once divided out, nor on which way it faces.
+  Shading sh;
+  sh.light = LightKind::headlight;
+  sh.shininess = 24;
+  const VolumeGeometry geo;
+  const ShadingModel model(sh, geo);
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> coord(-1.0, 1.0), scale(-30.0, 30.0);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const Vec3d g = Vec3d(coord(rng), coord(rng), coord(rng)) * std::exp2(scale(rng));
+    const Vec3d light = normalize(Vec3d(coord(rng), coord(rng), coord(rng)) + Vec3d(0, 0, 2));
+    const Vec3d half = ShadingModel::half_vector(normalize(Vec3d(coord(rng), coord(rng), 1.5)), light);
+    const double inv = 1 / length(g);
+    for (const double side : {1.0, -1.0}) {
+      const ShadingModel::Lighting want = model.lighting_with_half(g * (side * inv), light, half, false);
+      const ShadingModel::Lighting got = model.lighting_of_gradient(g * side, inv, light, half);
+      ASSERT_NEAR(got.diffuse, want.diffuse, 1e-6f) << "trial " << trial;
+      ASSERT_NEAR(got.specular, want.specular, 1e-6f) << "trial " << trial;
     }
   }
 }
