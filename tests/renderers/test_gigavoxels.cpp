@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <memory>
 #include <map>
 #include <random>
 #include <set>
@@ -103,53 +104,54 @@ TEST(GigaVoxelsNodeTree, LruNeverEvictsWhatTheFrameUsedNorTheRoot) {
 TEST(GigaVoxelsNodeTree, HoldsOnlyNodesReachableFromTheRootAtTheirAddress) {
   // The loader keeps the tree address of a node whose brick it asked for; by the time the brick
   // arrives the block may hold other nodes, or be cut off from the root with its parent's.
-  NodeTree tree(2, 4, 4, 8);
-  tree.set_root(Node::make_data(false), {});
-  tree.begin_feedback(1);
-  const uint32_t a = tree.subdivide(0);
-  for (int i = 0; i < 8; ++i) tree.set_node(a + uint32_t(i), Node::make_data(false));
-  const uint32_t b = tree.subdivide(a + 3);
-  for (int i = 0; i < 8; ++i) tree.set_node(b + uint32_t(i), Node::make_data(false));
-  tree.end_of_feedback();
-  const NodeAddress at_b1 = tree.address_of(b + 1);
-  EXPECT_TRUE(tree.holds(0, NodeAddress{}));
-  EXPECT_TRUE(tree.holds(a + 3, tree.address_of(a + 3)));
-  EXPECT_TRUE(tree.holds(b + 1, at_b1));
-  EXPECT_FALSE(tree.holds(b + 1, tree.address_of(b + 2)));  // another node's address
-  EXPECT_FALSE(tree.holds(1, NodeAddress{}));  // the root's block holds the root alone
+  // Each tree: 4 blocks (the root's, its children a, a grandchild block b, one free).
+  struct Grown {
+    std::unique_ptr<NodeTree> tree;
+    uint32_t a, b;
+  };
+  const auto subdivide = [](NodeTree& tree, uint32_t address) {
+    const uint32_t block = tree.subdivide(address);
+    for (int i = 0; i < 8; ++i) tree.set_node(block + uint32_t(i), Node::make_data(false));
+    return block;
+  };
+  const auto grow = [&] {
+    Grown g{std::make_unique<NodeTree>(2, 4, 4, 8), 0, 0};
+    g.tree->set_root(Node::make_data(false), {});
+    g.tree->begin_feedback(1);
+    g.a = subdivide(*g.tree, 0);
+    g.b = subdivide(*g.tree, g.a + 3);
+    g.tree->end_of_feedback();
+    g.tree->begin_feedback(2);  // frame 2 uses nothing: every block may be taken
+    g.tree->end_of_feedback();
+    return g;
+  };
 
+  const Grown g = grow();
+  NodeTree& tree = *g.tree;
+  const NodeAddress at_b1 = tree.address_of(g.b + 1);
+  EXPECT_TRUE(tree.holds(0, NodeAddress{}));
+  EXPECT_TRUE(tree.holds(g.a + 3, tree.address_of(g.a + 3)));
+  EXPECT_TRUE(tree.holds(g.b + 1, at_b1));
+  EXPECT_FALSE(tree.holds(g.b + 1, tree.address_of(g.b + 2)));  // another node's address
+  EXPECT_FALSE(tree.holds(1, NodeAddress{}));  // the root's block holds the root alone
   // The root's children move to a fresh block: the old one and its child block stay allocated
   // (with their parents and bases) but no descent reaches them.
-  tree.begin_feedback(2);
-  tree.end_of_feedback();
-  const uint32_t c = tree.subdivide(0);
-  ASSERT_NE(c / 8, a / 8);
-  ASSERT_NE(c / 8, b / 8);
-  for (int i = 0; i < 8; ++i) tree.set_node(c + uint32_t(i), Node::make_data(false));
+  const uint32_t c = subdivide(tree, 0);
+  ASSERT_NE(c / 8, g.a / 8);
+  ASSERT_NE(c / 8, g.b / 8);
   EXPECT_TRUE(tree.holds(c + 3, tree.address_of(c + 3)));
-  EXPECT_FALSE(tree.holds(a + 3, tree.address_of(a + 3)));
-  EXPECT_FALSE(tree.holds(b + 1, at_b1));
+  EXPECT_FALSE(tree.holds(g.a + 3, tree.address_of(g.a + 3)));
+  EXPECT_FALSE(tree.holds(g.b + 1, at_b1));
 
   // The loader's case: the parent's block is taken by a subdivision, its nodes cleared, and the
   // child block is cut off.
-  NodeTree t2(2, 4, 4, 8);
-  t2.set_root(Node::make_data(false), {});
-  t2.begin_feedback(1);
-  const uint32_t a2 = t2.subdivide(0);
-  for (int i = 0; i < 8; ++i) t2.set_node(a2 + uint32_t(i), Node::make_data(false));
-  const uint32_t b2 = t2.subdivide(a2 + 3);
-  for (int i = 0; i < 8; ++i) t2.set_node(b2 + uint32_t(i), Node::make_data(false));
-  t2.end_of_feedback();
-  const NodeAddress at_b2 = t2.address_of(b2 + 1);
-  t2.begin_feedback(2);
-  t2.end_of_feedback();
-  const uint32_t free_block = t2.subdivide(b2);  // the free block first
-  for (int i = 0; i < 8; ++i) t2.set_node(free_block + uint32_t(i), Node::make_data(false));
-  const uint32_t taken = t2.subdivide(b2 + 2);  // then the least recently used: a2's
-  ASSERT_EQ(taken / 8, a2 / 8);
-  for (int i = 0; i < 8; ++i) t2.set_node(taken + uint32_t(i), Node::make_data(false));
-  EXPECT_FALSE(t2.node(0).has_children());
-  EXPECT_FALSE(t2.holds(b2 + 1, at_b2));
+  const Grown h = grow();
+  const NodeAddress at_hb1 = h.tree->address_of(h.b + 1);
+  subdivide(*h.tree, h.b);  // the free block first
+  const uint32_t taken = subdivide(*h.tree, h.b + 2);  // then the least recently used: a's
+  ASSERT_EQ(taken / 8, h.a / 8);
+  EXPECT_FALSE(h.tree->node(0).has_children());
+  EXPECT_FALSE(h.tree->holds(h.b + 1, at_hb1));
 }
 
 TEST(GigaVoxelsNodeTree, AFreeSlotIsTakenBeforeOneFilledLastFrame) {
