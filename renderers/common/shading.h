@@ -72,13 +72,16 @@ class ShadingModel {
   bool light_fixed_along_rays() const { return s_.light == LightKind::headlight || s_.light == LightKind::directional; }
   /// @brief lighting() with the half vector `half` (half_vector()) given.
   Lighting lighting_with_half(const Vec3d& n, const Vec3d& light, const Vec3d& half, bool shadowed) const {
-    if (shadowed) return {};
-    return lighting_of(std::fabs(dot(n, light)), std::fabs(dot(n, half)));
+    return shadowed ? Lighting{} : lighting_of_gradient(n, 1.0, light, half);
   }
   /// @brief lighting_with_half() for the normal g * inv_length (inv_length = 1 / |g|), without
   /// forming it (two-sided: which way it faces does not matter).
   Lighting lighting_of_gradient(const Vec3d& g, double inv_length, const Vec3d& light, const Vec3d& half) const {
-    return lighting_of(std::fabs(dot(g, light)) * inv_length, std::fabs(dot(g, half)) * inv_length);
+    Lighting l;
+    l.diffuse = float(std::fabs(dot(g, light)) * inv_length);
+    const double nh = std::fabs(dot(g, half)) * inv_length;
+    if (nh > 0) l.specular = float(shininess_power_ ? pow_uint(nh, shininess_power_) : std::pow(nh, double(s_.shininess)));
+    return l;
   }
   Vec3f apply(const Vec3f& base, const Lighting& l) const {
     if (!lit()) return base;
@@ -96,14 +99,6 @@ class ShadingModel {
   }
 
  private:
-  /// From |n.l| and |n.h|.
-  Lighting lighting_of(double nl, double nh) const {
-    Lighting l;
-    l.diffuse = float(nl);
-    if (nh > 0) l.specular = float(shininess_power_ ? pow_uint(nh, shininess_power_) : std::pow(nh, double(s_.shininess)));
-    return l;
-  }
-
   const Shading& s_;
   Vec3d light_position_, light_direction_;
   unsigned shininess_power_;  // the shininess when it is a whole number (then no pow), else 0

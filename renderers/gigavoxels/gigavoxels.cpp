@@ -123,7 +123,9 @@ BrickKey store_key(const NodeAddress& a) { return {uint32_t(a.depth), uint32_t(a
 template <typename Stored>
 class StoreSource final : public Source {
  public:
-  explicit StoreSource(const RenderContext& ctx) : ctx_(ctx), layout_(ctx.layout()) {}
+  /// @param reserved_slots L1 slots another reader keeps pinned beside the loader's stages.
+  explicit StoreSource(const RenderContext& ctx, uint32_t reserved_slots = 0)
+      : ctx_(ctx), layout_(ctx.layout()), reserved_slots_(reserved_slots) {}
   int arity() const override { return 2; }
   int brick_size() const override { return layout_.brick_size; }
   int max_depth() const override { return layout_.finest(); }
@@ -171,11 +173,15 @@ class StoreSource final : public Source {
     return Fill::filled;
   }
   uint64_t loaded() const override { return loaded_; }
-  void set_request_budget(uint32_t requests) override { requests_left_ = std::min(requests, std::max(1u, ctx_.cache().pool_slots() / 2)); }
+  void set_request_budget(uint32_t requests) override {
+    const uint32_t slots = ctx_.cache().pool_slots(), stages = slots - std::min(reserved_slots_, slots / 2);
+    requests_left_ = std::min(requests, std::max(1u, stages / 2));
+  }
 
  private:
   const RenderContext& ctx_;
   const StoreLayout& layout_;
+  uint32_t reserved_slots_;
   uint64_t loaded_ = 0;
   uint32_t requests_left_ = std::numeric_limits<uint32_t>::max();
 };
@@ -187,7 +193,7 @@ template <typename Stored>
 class AmplifiedSource final : public Source {
  public:
   AmplifiedSource(const RenderContext& ctx, const GigaVoxelsParams& p)
-      : ctx_(ctx), layout_(ctx.layout()), stored_(ctx), coarse_(ctx.cache(), coarse_counters_, ctx.layout().finest()) {
+      : ctx_(ctx), layout_(ctx.layout()), stored_(ctx, kCoarseSamplerSlots), coarse_(ctx.cache(), coarse_counters_, ctx.layout().finest()) {
     const NodeRecord& root = ctx.nodes().at(BrickKey{0, 0, 0, 0});
     gigavoxels::AmplifiedParams ap;
     ap.brick_size = layout_.brick_size;
@@ -252,10 +258,7 @@ class AmplifiedSource final : public Source {
   }
   uint64_t produced() const override { return produced_; }
   uint64_t loaded() const override { return stored_.loaded(); }
-  void set_request_budget(uint32_t requests) override {
-    const uint32_t slots = ctx_.cache().pool_slots();  // the coarse sampler's slots are not the loader's
-    stored_.set_request_budget(std::min(requests, std::max(1u, (slots - std::min(kCoarseSamplerSlots, slots / 2)) / 2)));
-  }
+  void set_request_budget(uint32_t requests) override { stored_.set_request_budget(requests); }
 
  private:
   const RenderContext& ctx_;
@@ -1471,7 +1474,7 @@ class GigaVoxelsRenderer final : public Renderer {
   /// frames of 0.1-1 s); one this late is left to the rays to ask for again.
   static constexpr uint64_t kTransitFrames = 16;
   std::vector<InTransit> in_transit_;
-  std::unordered_set<uint32_t> transit_addresses_;
+  std::unordered_set<uint32_t> transit_addresses_;  // in_transit_'s, rebuilt each pass (a member for its buckets)
   std::vector<float> scratch_;
   std::unordered_map<uint64_t, uint32_t> shared_;  // instanced brick id -> slot
   gigavoxels::CompactionReport compaction_;
