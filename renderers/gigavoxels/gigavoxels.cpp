@@ -309,7 +309,7 @@ class GigaVoxelsRenderer final : public Renderer {
     groups_ = groups_per_axis(m_);
     group_count_ = group_count(m_);
     group_distances_.assign(size_t(tree_.brick_capacity()) * group_count_, 0);
-    brick_differences_.assign(size_t(tree_.brick_capacity()), BrickDifferences{});
+    if (keeps_differences(ctx, p)) brick_differences_.assign(size_t(tree_.brick_capacity()), BrickDifferences{});
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -332,7 +332,7 @@ class GigaVoxelsRenderer final : public Renderer {
     // Halvings down to parts of 2^-hidden_crossings voxels whatever the step, so that a coarser
     // step costs fewer samples, not thinner features missed.
     search_halvings_ = p.hidden_crossings > 0 ? p.hidden_crossings + int(std::ceil(std::log2(step_) - 1e-9)) : 0;
-    search_hidden_crossings_ = scene_.mode == RenderMode::iso && search_halvings_ > 0;
+    search_hidden_crossings_ = keeps_differences(ctx, p) && search_halvings_ > 0;
     finest_voxel_unit_ = 1.0 / extent_;  // one finest voxel in unit coordinates (opacity reference)
     unit_gradient_to_world_ = Vec3d(1.0) / (geo_.spacing * extent_);
     tree_.set_root(root_node(), NodeAddress{});
@@ -407,7 +407,7 @@ class GigaVoxelsRenderer final : public Renderer {
                      {"node_blocks", double(tree_.block_capacity())},
                      {"bricks_in_use", double(tree_.bricks_in_use())},
                      {"brick_slots", double(tree_.brick_capacity())},
-                     {"brick_pool_bytes", double(uint64_t(tree_.brick_capacity()) * slot_bytes(m_))},
+                     {"brick_pool_bytes", double(uint64_t(tree_.brick_capacity()) * slot_bytes(m_, !brick_differences_.empty()))},
                      {"bricks_used", double(tree_.bricks_used_this_frame())},
                      {"failed_allocations", double(tree_.counters().failed_allocations - failed_before_)},
                      {"loader_ms", loader_seconds_ * 1e3}};
@@ -429,11 +429,16 @@ class GigaVoxelsRenderer final : public Renderer {
   /// stages its copies through (l1_staging_slots), with each slot's bounds.
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
     if (p.brick_slots) return p.brick_slots;
-    return uint32_t(std::clamp<uint64_t>(ctx.backend_pool_bytes() / slot_bytes(s.brick_size()), 8, 1u << 20));
+    return uint32_t(std::clamp<uint64_t>(ctx.backend_pool_bytes() / slot_bytes(s.brick_size(), keeps_differences(ctx, p)), 8, 1u << 20));
   }
-  static uint64_t slot_bytes(int m) {
+  static uint64_t slot_bytes(int m, bool with_differences) {
     const uint64_t e = uint64_t(m + 2);
-    return e * e * e * sizeof(Voxel) + group_count(m) + sizeof(BrickDifferences);
+    return e * e * e * sizeof(Voxel) + group_count(m) + (with_differences ? sizeof(BrickDifferences) : 0);
+  }
+  /// Whether bricks keep their differences: only iso's search for hidden crossings reads them
+  /// (search_hidden_crossings_ is this, less a search of no halvings at a coarse step).
+  static bool keeps_differences(const RenderContext& ctx, const GigaVoxelsParams& p) {
+    return ctx.scene().mode == RenderMode::iso && p.hidden_crossings > 0;
   }
   /// Cell groups per axis: the cells start at sample coordinates 0 .. M (M + 1 of them, the
   /// border included), kCellGroup to a group.
@@ -897,7 +902,7 @@ class GigaVoxelsRenderer final : public Renderer {
       q.brick = nullptr;
       if (q.node.has_brick()) {
         q.brick = r.brick(q.node.brick()), q.group_distances = r.group_distances(q.node.brick());
-        q.differences = &r.brick_differences_of(q.node.brick());
+        q.differences = r.search_hidden_crossings_ ? &r.brick_differences_of(q.node.brick()) : nullptr;
         lv.push(q);
       }
       q.levels = lv;
@@ -1506,7 +1511,7 @@ class GigaVoxelsRenderer final : public Renderer {
   int groups_ = 9;            // cell groups per brick axis
   size_t group_count_ = 729;  // cell groups per brick
   std::vector<uint8_t> group_distances_;  // brick_capacity() x group_count_
-  std::vector<BrickDifferences> brick_differences_;  // per slot (set_brick_bounds)
+  std::vector<BrickDifferences> brick_differences_;  // per slot (set_brick_bounds), where keeps_differences
   int search_halvings_ = 0;                // of a step: to parts of 2^-hidden_crossings voxels
   bool search_hidden_crossings_ = false;  // iso with search_halvings_ > 0
   gigavoxels::PreintegratedTf preintegrated_;

@@ -757,6 +757,22 @@ TEST_F(GigaVoxels, BrickPoolAndCacheShareTheL1BudgetAndStillConverge) {
   EXPECT_EQ(by_hand.cache().stats().l1_pool_bytes, budget / by_hand.cache().format().bytes() * by_hand.cache().format().bytes());
 }
 
+TEST_F(GigaVoxels, OnlyIsoBricksKeepTheDifferencesItsSearchReads) {
+  // A brick's differences bound the field for iso's search for hidden crossings; DVR never
+  // reads them, so its slots are that much smaller and the same budget holds more of them.
+  const auto slot_bytes = [&](const std::string& mode, const RenderSession::Options& options) {
+    RenderSession session(scene(mode), options);
+    FrameBuffers fb;
+    const FrameStats st = session.render(0, fb, kAll);
+    return st.backend_value("brick_pool_bytes") / st.backend_value("brick_slots");
+  };
+  const double iso = slot_bytes(iso_scene(), backend_options("gigavoxels"));
+  const double dvr = slot_bytes(dvr_scene(), backend_options("gigavoxels"));
+  const double iso_without_search = slot_bytes(iso_scene(), backend_options("gigavoxels", {{"hidden_crossings", 0}}));
+  EXPECT_EQ(iso - dvr, double(sizeof(gigavoxels::BrickDifferences)));
+  EXPECT_EQ(iso_without_search, dvr);
+}
+
 TEST_F(GigaVoxels, ABrickTheLoaderAskedForIsCopiedWhenItArrivesAndReadOnce) {
   // A ray asks only for the first thing it misses, which moves as other data arrives: a brick
   // loaded for it may not be asked for again the next frame. The loader copies what it asked
