@@ -760,17 +760,25 @@ TEST_F(GigaVoxels, BrickPoolAndCacheShareTheL1BudgetAndStillConverge) {
 TEST_F(GigaVoxels, OnlyIsoBricksKeepTheDifferencesItsSearchReads) {
   // A brick's differences bound the field for iso's search for hidden crossings; DVR never
   // reads them, so its slots are that much smaller and the same budget holds more of them.
-  const auto slot_bytes = [&](const std::string& mode, const RenderSession::Options& options) {
+  struct Pool {
+    double slots = 0, slot_bytes = 0;
+  };
+  const auto pool = [&](const std::string& mode, const RenderSession::Options& options) {
     RenderSession session(scene(mode), options);
     FrameBuffers fb;
     const FrameStats st = session.render(0, fb, kAll);
-    return st.backend_value("brick_pool_bytes") / st.backend_value("brick_slots");
+    const double slots = st.backend_value("brick_slots");
+    return Pool{slots, st.backend_value("brick_pool_bytes") / slots};
   };
-  const double iso = slot_bytes(iso_scene(), backend_options("gigavoxels"));
-  const double dvr = slot_bytes(dvr_scene(), backend_options("gigavoxels"));
-  const double iso_without_search = slot_bytes(iso_scene(), backend_options("gigavoxels", {{"hidden_crossings", 0}}));
-  EXPECT_EQ(iso - dvr, double(sizeof(gigavoxels::BrickDifferences)));
-  EXPECT_EQ(iso_without_search, dvr);
+  const Pool iso = pool(iso_scene(), backend_options("gigavoxels"));
+  const Pool dvr = pool(dvr_scene(), backend_options("gigavoxels"));
+  EXPECT_EQ(iso.slot_bytes - dvr.slot_bytes, double(sizeof(gigavoxels::BrickDifferences)));
+  EXPECT_GT(dvr.slots, iso.slots);  // the same L1 budget
+  // Iso without a search: none (hidden_crossings 0), or a step so fine that 2^-1 voxels of it
+  // need no halving.
+  EXPECT_EQ(pool(iso_scene(), backend_options("gigavoxels", {{"hidden_crossings", 0}})).slot_bytes, dvr.slot_bytes);
+  EXPECT_EQ(pool(iso_scene(), backend_options("gigavoxels", {{"hidden_crossings", 1}, {"step", 0.25}})).slot_bytes, dvr.slot_bytes);
+  EXPECT_EQ(pool(iso_scene(), backend_options("gigavoxels", {{"hidden_crossings", 1}, {"step", 1}})).slot_bytes, iso.slot_bytes);
 }
 
 TEST_F(GigaVoxels, ABrickTheLoaderAskedForIsCopiedWhenItArrivesAndReadOnce) {
