@@ -310,7 +310,6 @@ class GigaVoxelsRenderer final : public Renderer {
     groups_ = groups_per_axis(m_);
     group_count_ = group_count(m_);
     group_distances_.assign(size_t(tree_.brick_capacity()) * group_count_, 0);
-    if (keeps_differences(ctx, p)) brick_differences_.assign(size_t(tree_.brick_capacity()), BrickDifferences{});
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
@@ -330,6 +329,7 @@ class GigaVoxelsRenderer final : public Renderer {
     step_ = base_step(scene_, p);
     search_halvings_ = search_halvings(scene_, p);
     search_hidden_crossings_ = keeps_differences(ctx, p);
+    if (search_hidden_crossings_) brick_differences_.assign(size_t(tree_.brick_capacity()), BrickDifferences{});
     finest_voxel_unit_ = 1.0 / extent_;  // one finest voxel in unit coordinates (opacity reference)
     unit_gradient_to_world_ = Vec3d(1.0) / (geo_.spacing * extent_);
     tree_.set_root(root_node(), NodeAddress{});
@@ -938,7 +938,6 @@ class GigaVoxelsRenderer final : public Renderer {
         ray_half = ShadingModel::half_vector(-ray.world.dir, ray_light);
       }
       const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
-      const auto to_voxels = [&](double dt) { return dt * unit_per_t / r.finest_voxel_unit_; };  // opacity's unit
       const double stop = r.scene_.quality.termination_opacity;
       const int n = r.n_;
       // Descents and samples advance apart: a step may reach past the next node, which is still
@@ -1072,12 +1071,12 @@ class GigaVoxelsRenderer final : public Renderer {
             double t_from = t_at;
             if (s.have_prev && s.prev_t < t_at) {
               t_from = std::clamp(node_entry(frame), s.prev_t, t_at);
-              integrate(s, px, v, t_from, to_voxels(t_from - s.prev_t), Vec3d(0.0), ray);
+              integrate(s, px, v, t_from, to_voxels(t_from - s.prev_t, unit_per_t), Vec3d(0.0), ray);
               if (s.alpha >= stop) break;
             }
             Vec3f col;
             float a;
-            r.preintegrated_.segment(v, v, to_voxels(t_end - t_from), col, a);
+            r.preintegrated_.segment(v, v, to_voxels(t_end - t_from, unit_per_t), col, a);
             composite(s, px, col, a, t_from, ShadingModel::Lighting{}, Vec3d(0.0), ray);  // no gradient: ambient light
             if (s.alpha >= stop) break;
             s.start_segment(v, t_end);
@@ -1203,9 +1202,10 @@ class GigaVoxelsRenderer final : public Renderer {
     /// exit within the ray), sampling the levels lv collected: march()'s loop for DVR, with
     /// the ray's state in locals so that a sample's value, segment, lighting and compositing
     /// stay in registers (7% less time per lit DVR frame than when it was one loop with iso,
-    /// 165 -> 154 ms on fBm 256^3 at 256x256, with the same samples and arithmetic). kOneLevel: the footprint stays finer than the finest
-    /// level met up to t_end, so every sample reads that level alone at one base step, with
-    /// no footprint, log or blend per sample. Returns whether the ray is finished.
+    /// 165 -> 154 ms on fBm 256^3 at 256x256, with the same samples and arithmetic).
+    /// kOneLevel: the footprint stays finer than the finest level met up to t_end, so every
+    /// sample reads that level alone at one base step, with no footprint, log or blend per
+    /// sample. Returns whether the ray is finished.
     template <bool kOneLevel>
     bool march_dvr(const Levels& lv, RayState& ray_state, double& t_io, double t_end, double t_face, double unit_per_t,
                    double stop, const PrimaryRay& ray, PixelResult& px) {
@@ -1253,26 +1253,24 @@ class GigaVoxelsRenderer final : public Renderer {
             t_next = t + std::max(steps, 1.0) * dt;
           }
         }
-        if (leap && !s.have_prev) {  // the clear groups add nothing; their last value starts the next segment
+        // A sample at t, unless a leap starts there with no segment open (the clear groups add
+        // nothing): then the leap's last value alone starts the next segment.
+        if (!leap || s.have_prev) {
           ++counters.samples;
-          s.start_segment(sample(bl, t_next - dt, nullptr), t_next - dt);
-          t = t_next;
-          continue;
-        }
-        ++counters.samples;
-        Vec3d g(0.0);
-        const float v = sample(bl, t, gradients ? &g : nullptr);
-        bool lit_here = false;
-        if (s.have_prev) {
-          lit_here = integrate(s, px, v, t, (t - s.prev_t) * unit_per_t / r.finest_voxel_unit_, g, ray);
-          if (s.alpha >= stop) {
-            finished = true;
-            break;
+          Vec3d g(0.0);
+          const float v = sample(bl, t, gradients ? &g : nullptr);
+          bool lit_here = false;
+          if (s.have_prev) {
+            lit_here = integrate(s, px, v, t, to_voxels(t - s.prev_t, unit_per_t), g, ray);
+            if (s.alpha >= stop) {
+              finished = true;
+              break;
+            }
           }
+          s.prev_value = v, s.prev_t = t, s.have_prev = true;
+          s.prev_gradient = g, s.have_prev_gradient = gradients, s.have_prev_lighting = lit_here;
         }
-        s.prev_value = v, s.prev_t = t, s.have_prev = true;
-        s.prev_gradient = g, s.have_prev_gradient = gradients, s.have_prev_lighting = lit_here;
-        if (leap) {  // this sample closed the segment into the clear groups
+        if (leap) {  // the segment into the clear groups is closed: their last value starts the next
           ++counters.samples;
           s.start_segment(sample(bl, t_next - dt, nullptr), t_next - dt);
           t = t_next;
@@ -1462,6 +1460,9 @@ class GigaVoxelsRenderer final : public Renderer {
       s.prev_lighting = back;
       return true;
     }
+    /// A stretch dt of ray parameter in finest voxels, opacity's unit (unit_per_t: unit-cube
+    /// length per unit t).
+    double to_voxels(double dt, double unit_per_t) const { return dt * unit_per_t / r.finest_voxel_unit_; }
     /// DVR's step, in base steps, where a sample counts less. A segment's error reaches the
     /// image through the light left to the ray, T = 1 - alpha; where the error per unit
     /// length grows with the step (lit DVR: the lighting of a segment's two ends stands for
