@@ -86,6 +86,7 @@ struct GigaVoxelsParams {
   bool skip_cells = true;      // leap the cells of a brick that hold nothing visible
   int hidden_crossings = 5;    // iso: a step is searched for a crossing pair it may hide, down to 2^-this voxels (0: none)
   double adaptive_step = 8;    // DVR: the most a step grows where a sample counts less (1: fixed)
+  bool face_lighting = true;   // DVR: a segment's end lightings weighted by the cell faces it crosses
 };
 
 using gigavoxels::kCellGroup;
@@ -708,8 +709,35 @@ class GigaVoxelsRenderer final : public Renderer {
           light_fixed(r.scene_.mode == RenderMode::dvr && r.shading_.lit() && r.shading_.light_fixed_along_rays()),
           path(size_t(r.source_->max_depth()) + 1), scaled_eye(size_t(r.source_->max_depth()) + 1) {}
 
-    /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t.
-    float sample_brick(const PathNode& b, double t, Vec3d* gradient) const {
+    /// Where a sample fell among its brick's cells: the cell (lower corner, brick voxels) and
+    /// the position in it.
+    struct CellPoint {
+      int32_t cell[3] = {};
+      float u[3] = {};
+    };
+    /// The weight of a lit DVR segment's front-end lighting, from where the segment from a to b
+    /// (one brick's cells) crosses cell faces. The analytic gradient of the trilinear
+    /// interpolant, and so the lighting, is smooth inside a cell and jumps at its faces; each
+    /// end's lighting stands for the cells it lies in, up to the first face crossed and from
+    /// the last, and their mean for the cells in between. The mean of the ends alone (a
+    /// segment in one cell) errs by the share of the segment on the wrong side of a face,
+    /// which made lit DVR converge to first order in the step.
+    static float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
+      float first = 1, last = 0;  // the first and last faces crossed, as fractions of the segment
+      for (int k = 0; k < 3; ++k) {
+        const int32_t c0 = a.cell[k], c1 = b.cell[k];
+        if (c0 == c1) continue;
+        const float l0 = float(c0) + a.u[k], inv_span = 1 / (float(c1 - c0) + (b.u[k] - a.u[k]));
+        const float first_face = float(c1 > c0 ? c0 + 1 : c0), last_face = float(c1 > c0 ? c1 : c1 + 1);
+        first = std::min(first, (first_face - l0) * inv_span);  // a NaN (a zero span) leaves them
+        last = std::max(last, (last_face - l0) * inv_span);
+      }
+      return 0.5f * (first + last);  // first + (last - first) / 2; 0.5 when no face is crossed
+    }
+
+    /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t, and
+    /// where in the brick's cells t fell (at).
+    float sample_brick(const PathNode& b, double t, Vec3d* gradient, CellPoint* at = nullptr) const {
       const int64_t e = r.m_ + 2;
       const float top = float(e - 1);
       int64_t cell[3];
@@ -719,6 +747,8 @@ class GigaVoxelsRenderer final : public Renderer {
         cell[a] = std::min<int64_t>(int64_t(l), e - 2);
         u[a] = l - float(cell[a]);
       }
+      if (at)
+        for (int a = 0; a < 3; ++a) at->cell[a] = int32_t(cell[a]), at->u[a] = u[a];
       const Voxel* q = b.brick + (cell[2] * e + cell[1]) * e + cell[0];
       const int64_t dy = e, dz = e * e;
       const float c[8] = {float(q[0]),  float(q[1]),  float(q[dy]),      float(q[dy + 1]),
@@ -750,11 +780,12 @@ class GigaVoxelsRenderer final : public Renderer {
 
     /// Quadrilinear: the two levels around the footprint's depth lambda, among those collected.
     float sample(const Levels& lv, double lambda, double t, Vec3d* gradient) const { return sample(blend(lv, lambda), t, gradient); }
-    float sample(const Blend& bl, double t, Vec3d* gradient) const {
-      if (!bl.coarse) return sample_brick(*bl.finer, t, gradient);
+    /// at: where t fell among the finer brick's cells.
+    float sample(const Blend& bl, double t, Vec3d* gradient, CellPoint* at = nullptr) const {
+      if (!bl.coarse) return sample_brick(*bl.finer, t, gradient, at);
       Vec3d gc(0.0), gf(0.0);
       const float vc = sample_brick(*bl.coarse, t, gradient ? &gc : nullptr);
-      const float vf = sample_brick(*bl.finer, t, gradient ? &gf : nullptr);
+      const float vf = sample_brick(*bl.finer, t, gradient ? &gf : nullptr, at);
       if (gradient) *gradient = gc * (1 - bl.w) + gf * bl.w;
       return float(vc * (1 - bl.w) + vf * bl.w);
     }
@@ -1216,6 +1247,11 @@ class GigaVoxelsRenderer final : public Renderer {
       double t = t_io, visible_until = -kInf;  // the cell group of the last look showed something before
       RayState s = ray_state;  // a copy the compiler keeps in registers
       bool finished = false;
+      // Where the previous sample fell among the cells of its brick (prev_lattice), when it
+      // was taken here with a gradient: a segment within one brick is lit by its faces.
+      CellPoint prev_at;
+      const PathNode* prev_lattice = nullptr;
+      const bool face_lighting = r.p_.face_lighting;
       // One more sample at the node's exit, so that the part-step to it is integrated even
       // when the next node takes no samples (hidden, or past the ray's end: on Marschner-Lobb
       // 64^3 at step 1, leaving that out doubled the error).
@@ -1258,10 +1294,12 @@ class GigaVoxelsRenderer final : public Renderer {
         if (!leap || s.have_prev) {
           ++counters.samples;
           Vec3d g(0.0);
-          const float v = sample(bl, t, gradients ? &g : nullptr);
+          CellPoint at;
+          const float v = sample(bl, t, gradients ? &g : nullptr, &at);
           bool lit_here = false;
           if (s.have_prev) {
-            lit_here = integrate(s, px, v, t, to_voxels(t - s.prev_t, unit_per_t), g, ray);
+            lit_here = integrate(s, px, v, t, to_voxels(t - s.prev_t, unit_per_t), g, ray,
+                                 prev_lattice == bl.finer ? &prev_at : nullptr, &at);
             if (s.alpha >= stop) {
               finished = true;
               break;
@@ -1269,9 +1307,11 @@ class GigaVoxelsRenderer final : public Renderer {
           }
           s.prev_value = v, s.prev_t = t, s.have_prev = true;
           s.prev_gradient = g, s.have_prev_gradient = gradients, s.have_prev_lighting = lit_here;
+          prev_at = at, prev_lattice = face_lighting ? bl.finer : nullptr;
         }
         if (leap) {  // the segment into the clear groups is closed: their last value starts the next
           ++counters.samples;
+          prev_lattice = nullptr;  // no gradient at the segment's start
           s.start_segment(sample(bl, t_next - dt, nullptr), t_next - dt);
           t = t_next;
           continue;
@@ -1444,19 +1484,26 @@ class GigaVoxelsRenderer final : public Renderer {
     }
     /// DVR: integrates the segment from the previous sample to t, where the value is v and the
     /// gradient g (zero: ambient light alone at that end), `voxels` finest voxels long. Shaded
-    /// with the mean of its ends' lighting (the back end's alone is half a segment off; the
-    /// lighting of a mean gradient is not the mean lighting where normals turn). Returns whether
-    /// the segment showed anything, and so whether t's lighting was computed (s.prev_lighting)
-    /// for the next segment.
+    /// with its ends' lighting, weighted by the cell faces between them where both lie in one
+    /// brick (prev_at and at: front_lighting_weight), else their mean (the back end's alone is
+    /// half a segment off; the lighting of a mean gradient is not the mean lighting where
+    /// normals turn). Returns whether the segment showed anything, and so whether t's lighting
+    /// was computed (s.prev_lighting) for the next segment.
     [[gnu::always_inline]] bool integrate(RayState& s, PixelResult& px, float v, double t, double voxels, const Vec3d& g,
-                                          const PrimaryRay& ray) {
+                                          const PrimaryRay& ray, const CellPoint* prev_at = nullptr,
+                                          const CellPoint* at = nullptr) {
       Vec3f col;
       float a;
       r.preintegrated_.segment(s.prev_value, v, voxels, col, a);
       if (!(a > 0)) return false;
       const ShadingModel::Lighting back = lighting_at(t, g, ray);
       if (!s.have_prev_lighting && s.have_prev_gradient) s.prev_lighting = lighting_at(s.prev_t, s.prev_gradient, ray);
-      composite(s, px, col, a, t, s.have_prev_gradient ? back.mean(s.prev_lighting) : back, g, ray);
+      if (s.have_prev_gradient) {
+        const float front_weight = prev_at ? front_lighting_weight(*prev_at, *at) : 0.5f;
+        composite(s, px, col, a, t, s.prev_lighting.mix(back, front_weight), g, ray);
+      } else {
+        composite(s, px, col, a, t, back, g, ray);
+      }
       s.prev_lighting = back;
       return true;
     }
@@ -1467,7 +1514,9 @@ class GigaVoxelsRenderer final : public Renderer {
     /// image through the light left to the ray, T = 1 - alpha; where the error per unit
     /// length grows with the step (lit DVR: the lighting of a segment's two ends stands for
     /// all of it), the fewest samples for a given image error take steps growing as T^-1/2,
-    /// up to adaptive_step. By T alone: weighting the extinction met as well, (T tau)^-1/2,
+    /// up to adaptive_step. (With face_lighting the error falls faster than the step, about
+    /// as its 1.3th power on Marschner-Lobb, for which T^-1/2.3 would be the law; T^-1/2
+    /// still takes 0.84x a fixed step's samples at equal error there.) By T alone: weighting the extinction met as well, (T tau)^-1/2,
     /// saved 15% more samples on lit fBm but grew the step after every stretch of nothing
     /// visible, and stepped over a thin shell behind empty space
     /// (AdaptiveStepStillSeesAThinSheetPastEmptySpace: RMSE 0.021 against a fixed step's 0.0025).
@@ -1597,6 +1646,8 @@ BackendEntry gigavoxels_backend() {
                                      "of 2^-hidden_crossings voxels, where the brick's bounds allow one (0: none)"},
       {"adaptive_step", 8, 1, 64, "DVR: the most a step grows, as T^-1/2 where T is the light left to the ray (a sample behind "
                                   "opacity counts less); 1: a fixed step"},
+      {"face_lighting", 1, 0, 1, "lit DVR: 1 weights a segment's two end lightings by where it crosses cell faces (where the "
+                                 "analytic gradient jumps); 0: their mean"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
@@ -1631,6 +1682,7 @@ BackendEntry gigavoxels_backend() {
     gp.skip_cells = p["skip_cells"] != 0;
     gp.hidden_crossings = int(p["hidden_crossings"]);
     gp.adaptive_step = p["adaptive_step"];
+    gp.face_lighting = p["face_lighting"] != 0;
     return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       using Stored = decltype(stored);
       std::unique_ptr<Source> source;
