@@ -40,6 +40,7 @@
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/cell_groups.h"
+#include "renderers/gigavoxels/face_lighting.h"
 #include "renderers/gigavoxels/feedback.h"
 #include "renderers/gigavoxels/field_bounds.h"
 #include "renderers/gigavoxels/node_tree.h"
@@ -89,6 +90,7 @@ struct GigaVoxelsParams {
   bool face_lighting = true;   // DVR: a segment's end lightings weighted by the cell faces it crosses
 };
 
+using gigavoxels::CellPoint;
 using gigavoxels::kCellGroup;
 
 /// Where bricks come from: the store through the cache, or a procedural producer.
@@ -636,7 +638,7 @@ class GigaVoxelsRenderer final : public Renderer {
     float prev_value = 0;
     bool have_prev = false;
     // DVR: the previous sample's gradient and, once computed, its lighting: a segment is
-    // shaded with the mean of its two ends' lighting, each computed once.
+    // shaded with its two ends' lighting (face_lighting.h), each computed once.
     bool have_prev_gradient = false, have_prev_lighting = false;
     Vec3d prev_gradient{0.0};
     ShadingModel::Lighting prev_lighting;
@@ -708,32 +710,6 @@ class GigaVoxelsRenderer final : public Renderer {
         : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
           light_fixed(r.scene_.mode == RenderMode::dvr && r.shading_.lit() && r.shading_.light_fixed_along_rays()),
           path(size_t(r.source_->max_depth()) + 1), scaled_eye(size_t(r.source_->max_depth()) + 1) {}
-
-    /// Where a sample fell among its brick's cells: the cell (lower corner, brick voxels) and
-    /// the position in it.
-    struct CellPoint {
-      int32_t cell[3] = {};
-      float u[3] = {};
-    };
-    /// The weight of a lit DVR segment's front-end lighting, from where the segment from a to b
-    /// (one brick's cells) crosses cell faces. The analytic gradient of the trilinear
-    /// interpolant, and so the lighting, is smooth inside a cell and jumps at its faces; each
-    /// end's lighting stands for the cells it lies in, up to the first face crossed and from
-    /// the last, and their mean for the cells in between. The mean of the ends alone (a
-    /// segment in one cell) errs by the share of the segment on the wrong side of a face,
-    /// which made lit DVR converge to first order in the step.
-    static float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
-      float first = 1, last = 0;  // the first and last faces crossed, as fractions of the segment
-      for (int k = 0; k < 3; ++k) {
-        const int32_t c0 = a.cell[k], c1 = b.cell[k];
-        if (c0 == c1) continue;
-        const float l0 = float(c0) + a.u[k], inv_span = 1 / (float(c1 - c0) + (b.u[k] - a.u[k]));
-        const float first_face = float(c1 > c0 ? c0 + 1 : c0), last_face = float(c1 > c0 ? c1 : c1 + 1);
-        first = std::min(first, (first_face - l0) * inv_span);  // a NaN (a zero span) leaves them
-        last = std::max(last, (last_face - l0) * inv_span);
-      }
-      return 0.5f * (first + last);  // first + (last - first) / 2; 0.5 when no face is crossed
-    }
 
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t, and
     /// where in the brick's cells t fell (at).
@@ -1248,10 +1224,12 @@ class GigaVoxelsRenderer final : public Renderer {
       RayState s = ray_state;  // a copy the compiler keeps in registers
       bool finished = false;
       // Where the previous sample fell among the cells of its brick (prev_lattice), when it
-      // was taken here with a gradient: a segment within one brick is lit by its faces.
+      // was taken here, with a gradient, from that brick alone: a segment within one brick's
+      // cells is lit by the faces it crosses. Where two levels blend, the coarser level's
+      // gradient jumps at other faces, and the segment takes its ends' mean.
       CellPoint prev_at;
       const PathNode* prev_lattice = nullptr;
-      const bool face_lighting = r.p_.face_lighting;
+      const bool face_lighting = r.p_.face_lighting && gradients && r.shading_.lit();
       // One more sample at the node's exit, so that the part-step to it is integrated even
       // when the next node takes no samples (hidden, or past the ray's end: on Marschner-Lobb
       // 64^3 at step 1, leaving that out doubled the error).
@@ -1295,11 +1273,12 @@ class GigaVoxelsRenderer final : public Renderer {
           ++counters.samples;
           Vec3d g(0.0);
           CellPoint at;
-          const float v = sample(bl, t, gradients ? &g : nullptr, &at);
+          const bool one_lattice = face_lighting && !bl.coarse;
+          const float v = sample(bl, t, gradients ? &g : nullptr, one_lattice ? &at : nullptr);
           bool lit_here = false;
           if (s.have_prev) {
             lit_here = integrate(s, px, v, t, to_voxels(t - s.prev_t, unit_per_t), g, ray,
-                                 prev_lattice == bl.finer ? &prev_at : nullptr, &at);
+                                 one_lattice && prev_lattice == bl.finer ? &prev_at : nullptr, &at);
             if (s.alpha >= stop) {
               finished = true;
               break;
@@ -1307,7 +1286,7 @@ class GigaVoxelsRenderer final : public Renderer {
           }
           s.prev_value = v, s.prev_t = t, s.have_prev = true;
           s.prev_gradient = g, s.have_prev_gradient = gradients, s.have_prev_lighting = lit_here;
-          prev_at = at, prev_lattice = face_lighting ? bl.finer : nullptr;
+          prev_at = at, prev_lattice = one_lattice ? bl.finer : nullptr;
         }
         if (leap) {  // the segment into the clear groups is closed: their last value starts the next
           ++counters.samples;
@@ -1499,7 +1478,7 @@ class GigaVoxelsRenderer final : public Renderer {
       const ShadingModel::Lighting back = lighting_at(t, g, ray);
       if (!s.have_prev_lighting && s.have_prev_gradient) s.prev_lighting = lighting_at(s.prev_t, s.prev_gradient, ray);
       if (s.have_prev_gradient) {
-        const float front_weight = prev_at ? front_lighting_weight(*prev_at, *at) : 0.5f;
+        const float front_weight = prev_at ? gigavoxels::front_lighting_weight(*prev_at, *at) : 0.5f;
         composite(s, px, col, a, t, s.prev_lighting.mix(back, front_weight), g, ray);
       } else {
         composite(s, px, col, a, t, back, g, ray);
@@ -1514,9 +1493,10 @@ class GigaVoxelsRenderer final : public Renderer {
     /// image through the light left to the ray, T = 1 - alpha; where the error per unit
     /// length grows with the step (lit DVR: the lighting of a segment's two ends stands for
     /// all of it), the fewest samples for a given image error take steps growing as T^-1/2,
-    /// up to adaptive_step. (With face_lighting the error falls faster than the step, about
-    /// as its 1.3th power on Marschner-Lobb, for which T^-1/2.3 would be the law; T^-1/2
-    /// still takes 0.84x a fixed step's samples at equal error there.) By T alone: weighting the extinction met as well, (T tau)^-1/2,
+    /// up to adaptive_step. With face_lighting the error falls faster than the step between
+    /// steps 0.5 and 0.25 (as its 1.4th power on Marschner-Lobb 64^3), where a law of
+    /// T^-1/2.4 would fit better; T^-1/2 still takes 0.84x a fixed step's samples at equal
+    /// error there (AdaptiveStepSpendsSamplesWhereTheyCount). By T alone: weighting the extinction met as well, (T tau)^-1/2,
     /// saved 15% more samples on lit fBm but grew the step after every stretch of nothing
     /// visible, and stepped over a thin shell behind empty space
     /// (AdaptiveStepStillSeesAThinSheetPastEmptySpace: RMSE 0.021 against a fixed step's 0.0025).

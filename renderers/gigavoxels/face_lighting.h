@@ -1,0 +1,40 @@
+#pragma once
+/// @file face_lighting.h
+/// @brief How much of a lit DVR segment each end's lighting stands for. The analytic gradient
+/// of the trilinear interpolant, and so the lighting, is smooth inside a cell and jumps at its
+/// faces; shading a segment with the mean of its ends' lighting errs by the share of the
+/// segment on the wrong side of a face, which made lit DVR converge to first order in the
+/// step. Each end's lighting stands instead for the part of the segment in its own cell: up to
+/// the first face crossed, and from the last one; their mean stands for the cells between,
+/// where the ray takes no sample.
+
+#include <algorithm>
+#include <cstdint>
+
+namespace brickyard::gigavoxels {
+
+/// @brief Where a sample fell among its brick's trilinear cells: the cell (its lower corner,
+/// in brick voxels) and the position in it, each in [0, 1].
+struct CellPoint {
+  int32_t cell[3] = {};
+  float u[3] = {};
+};
+
+/// @brief The weight of the front end's lighting for the segment from a to b (points of one
+/// brick's cells): the fraction of the segment before the first cell face it crosses plus half
+/// the fraction between its first and last. 1/2 when it crosses none; always in [0, 1].
+inline float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
+  float first = 1, last = 0;  // the first and last faces crossed, as fractions of the segment
+  for (int k = 0; k < 3; ++k) {
+    const int32_t c0 = a.cell[k], c1 = b.cell[k];
+    if (c0 == c1) continue;
+    // Faces lie at whole coordinates; the span is nonzero, as b lies in another cell.
+    const float l0 = float(c0) + a.u[k], inv_span = 1 / (float(c1 - c0) + (b.u[k] - a.u[k]));
+    const float first_face = float(c1 > c0 ? c0 + 1 : c0), last_face = float(c1 > c0 ? c1 : c1 + 1);
+    first = std::min(first, (first_face - l0) * inv_span);
+    last = std::max(last, (last_face - l0) * inv_span);
+  }
+  return std::clamp(0.5f * (first + last), 0.0f, 1.0f);  // a reciprocal's rounding can pass 1
+}
+
+}  // namespace brickyard::gigavoxels
