@@ -317,6 +317,9 @@ class GigaVoxelsRenderer final : public Renderer {
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
     const StoreLayout& layout = ctx.layout();
+    normals_ = scene_.shading.normals;
+    if (p.source != 1)
+      for (int d = 0; d <= layout.finest(); ++d) level_dims_.push_back(layout.level_dims(d));
     if (p.source == 1) {
       if (geo_.dims.y != geo_.dims.x || geo_.dims.z != geo_.dims.x || geo_.dims.x < 2)
         throw Error(Errc::unsupported, "gigavoxels source=menger needs a cubic volume of at least 2 voxels per axis (its box is the sponge)")
@@ -731,9 +734,75 @@ class GigaVoxelsRenderer final : public Renderer {
                           float(q[dz]), float(q[dz + 1]), float(q[dz + dy]), float(q[dz + dy + 1])};
       if (!gradient) return trilinear(c, u[0], u[1], u[2]);
       Vec3f g;
-      const float v = trilinear_with_gradient(c, u[0], u[1], u[2], g);
+      float v;
+      if (r.normals_ == NormalMethod::analytic) {
+        v = trilinear_with_gradient(c, u[0], u[1], u[2], g);
+      } else {
+        v = trilinear(c, u[0], u[1], u[2]);
+        const float l[3] = {float(cell[0]) + u[0], float(cell[1]) + u[1], float(cell[2]) + u[2]};
+        g = difference_gradient(b, l, v, r.normals_ == NormalMethod::central);
+      }
       *gradient = Vec3d(g) * (b.scale * double(r.m_));
       return v;
+    }
+    /// The trilinear value of brick b at brick coordinates l (voxel i + 1 at i).
+    float brick_value(const PathNode& b, const float l[3]) const {
+      const int64_t e = r.m_ + 2;
+      int64_t cell[3];
+      float u[3];
+      for (int a = 0; a < 3; ++a) {
+        const float x = std::clamp(l[a], 0.0f, float(e - 1));
+        cell[a] = std::min<int64_t>(int64_t(x), e - 2);
+        u[a] = x - float(cell[a]);
+      }
+      const Voxel* q = b.brick + (cell[2] * e + cell[1]) * e + cell[0];
+      const int64_t dy = e, dz = e * e;
+      const float c[8] = {float(q[0]),  float(q[1]),  float(q[dy]),      float(q[dy + 1]),
+                          float(q[dz]), float(q[dz + 1]), float(q[dz + dy]), float(q[dz + dy + 1])};
+      return trilinear(c, u[0], u[1], u[2]);
+    }
+    /// The gradient (brick voxels) at brick coordinates l, where the value is v, by central or
+    /// forward differences one voxel apart, as the reference and raymarch take them: within
+    /// the store brick that holds the cell at l, one-sided at its faces (forward turning
+    /// backward at its upper face) and at the volume's. A node's brick starts half a voxel
+    /// below its store brick's first voxel, and its 1-voxel border holds one voxel of the
+    /// store brick below: in that half voxel, the lower difference reaches that voxel rather
+    /// than one further down (the only place the two differ). Past the store's levels (the
+    /// amplified store) and for the sponge, within the node's brick.
+    Vec3f difference_gradient(const PathNode& b, const float l[3], float v, bool central) const {
+      const int m = r.m_;
+      float lo[3], hi[3];  // where the differences may reach, in brick coordinates
+      for (int a = 0; a < 3; ++a) {
+        if (size_t(b.depth) < r.level_dims_.size()) {
+          // The store brick holding the cell of l's voxel position p (clamped into the volume).
+          const int64_t dims = r.level_dims_[size_t(b.depth)][a], base = b.c[a] * m - 1;  // p = base + l
+          const double p = double(base) + double(l[a]);
+          const int64_t cell = std::clamp<int64_t>(int64_t(std::max(p, 0.0)), 0, std::max<int64_t>(0, dims - 2));
+          const int64_t brick_lo = cell / m * m, brick_hi = std::min(brick_lo + m, dims - 1);
+          lo[a] = float(std::max<int64_t>(brick_lo - base, 0));
+          hi[a] = float(std::min<int64_t>(brick_hi - base, m + 1));
+        } else {
+          lo[a] = l[a] >= 1 ? 1.0f : 0.0f;
+          hi[a] = l[a] >= 1 ? float(m + 1) : 1.0f;
+        }
+      }
+      Vec3f g;
+      for (int a = 0; a < 3; ++a) {
+        float q1[3] = {l[0], l[1], l[2]}, q0[3] = {l[0], l[1], l[2]};
+        q1[a] = std::min(l[a] + 1, hi[a]);
+        q0[a] = central ? std::max(l[a] - 1, lo[a]) : l[a];
+        if (!central && q1[a] - q0[a] < 0.5f) q0[a] = std::max(l[a] - 1, lo[a]);  // at the upper face: backward
+        const float span = q1[a] - q0[a];
+        if (!(span > 0)) {
+          g[a] = 0;  // a flat axis (a volume one voxel thick)
+          continue;
+        }
+        const bool reuse_v = !central && q0[a] == l[a];
+        counters.samples += reuse_v ? 1 : 2;
+        const float f1 = brick_value(b, q1), f0 = reuse_v ? v : brick_value(b, q0);
+        g[a] = (f1 - f0) / span;
+      }
+      return g;
     }
 
     /// The bricks a sample at depth lambda reads: one, or (quadrilinear) the two levels around
@@ -1229,7 +1298,8 @@ class GigaVoxelsRenderer final : public Renderer {
       // gradient jumps at other faces, and the segment takes its ends' mean.
       CellPoint prev_at;
       const PathNode* prev_lattice = nullptr;
-      const bool face_lighting = r.p_.face_lighting && gradients && r.shading_.lit();
+      // Difference normals are continuous across faces: their ends' mean serves.
+      const bool face_lighting = r.p_.face_lighting && gradients && r.shading_.lit() && r.normals_ == NormalMethod::analytic;
       // One more sample at the node's exit, so that the part-step to it is integrated even
       // when the next node takes no samples (hidden, or past the ray's end: on Marschner-Lobb
       // 64^3 at step 1, leaving that out doubled the error).
@@ -1543,6 +1613,10 @@ class GigaVoxelsRenderer final : public Renderer {
   std::vector<Scale> scales_;  // N^depth
   std::vector<double> inv_scales_;  // 1 / N^depth, rounded
   double unit_offset_ = 0.5;   // unit = (voxel + unit_offset) / extent
+  NormalMethod normals_ = NormalMethod::analytic;
+  // A stored level's dims in voxels, per depth (difference normals stop at the volume's faces,
+  // as the reference's do); empty for the sponge, and past the store's finest level.
+  std::vector<Vec3s> level_dims_;
   double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1;
   Vec3d unit_gradient_to_world_{1.0};  // a gradient per unit-cube length to one per world length
   double footprint_per_t_ = 0;  // a pixel's footprint per unit distance, unit coordinates, times lod_ratio
@@ -1600,6 +1674,7 @@ BackendEntry gigavoxels_backend() {
                        "traversal with quadrilinear mipmap filtering, ray-guided feedback and loading, procedural bricks";
   e.info.kinds = {DataKind::structured};
   e.info.modes = {RenderMode::iso, RenderMode::dvr};
+  e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
   e.info.params = {
       {"lod_ratio", 0, 0, 1000, "target pixels per voxel; 0: the scene's quality.lod_ratio"},
       {"step", 0.5, 1e-3, 16, "sampling step in voxels of the level sampled (times quality.step_factor; DVR: / sampling_rate)"},
