@@ -318,8 +318,9 @@ class GigaVoxelsRenderer final : public Renderer {
     // sponge, the volume's box (voxel centres 0 to dims - 1).
     const StoreLayout& layout = ctx.layout();
     normals_ = scene_.shading.normals;
-    if (p.source != 1)
-      for (int d = 0; d <= layout.finest(); ++d) level_dims_.push_back(layout.level_dims(d));
+    if (p.source != 1)  // the amplified store's levels past the finest stored one halve its voxels
+      for (int d = 0; d <= source_->max_depth(); ++d)
+        level_dims_.push_back(d <= layout.finest() ? layout.level_dims(d) : layout.dims * (int64_t(1) << (d - layout.finest())));
     if (p.source == 1) {
       if (geo_.dims.y != geo_.dims.x || geo_.dims.z != geo_.dims.x || geo_.dims.x < 2)
         throw Error(Errc::unsupported, "gigavoxels source=menger needs a cubic volume of at least 2 voxels per axis (its box is the sponge)")
@@ -767,8 +768,8 @@ class GigaVoxelsRenderer final : public Renderer {
     /// backward at its upper face) and at the volume's. A node's brick starts half a voxel
     /// below its store brick's first voxel, and its 1-voxel border holds one voxel of the
     /// store brick below: in that half voxel, the lower difference reaches that voxel rather
-    /// than one further down (the only place the two differ). Past the store's levels (the
-    /// amplified store) and for the sponge, within the node's brick.
+    /// than one further down (the only place the two differ). For the sponge, within the
+    /// node's brick. Samples count the values read besides v (raymarch counts 4 or 6 a gradient).
     Vec3f difference_gradient(const PathNode& b, const float l[3], float v, bool central) const {
       const int m = r.m_;
       float lo[3], hi[3];  // where the differences may reach, in brick coordinates
@@ -1298,7 +1299,8 @@ class GigaVoxelsRenderer final : public Renderer {
       // gradient jumps at other faces, and the segment takes its ends' mean.
       CellPoint prev_at;
       const PathNode* prev_lattice = nullptr;
-      // Difference normals are continuous across faces: their ends' mean serves.
+      // Difference normals are continuous across cell faces (they jump only at store-brick
+      // faces, one in M, as the reference's do): their ends' mean serves.
       const bool face_lighting = r.p_.face_lighting && gradients && r.shading_.lit() && r.normals_ == NormalMethod::analytic;
       // One more sample at the node's exit, so that the part-step to it is integrated even
       // when the next node takes no samples (hidden, or past the ray's end: on Marschner-Lobb
@@ -1614,8 +1616,8 @@ class GigaVoxelsRenderer final : public Renderer {
   std::vector<double> inv_scales_;  // 1 / N^depth, rounded
   double unit_offset_ = 0.5;   // unit = (voxel + unit_offset) / extent
   NormalMethod normals_ = NormalMethod::analytic;
-  // A stored level's dims in voxels, per depth (difference normals stop at the volume's faces,
-  // as the reference's do); empty for the sponge, and past the store's finest level.
+  // A level's dims in voxels, per depth (difference normals stop at the volume's faces, as
+  // the reference's do); empty for the sponge, whose nodes' bricks bound its differences.
   std::vector<Vec3s> level_dims_;
   double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1;
   Vec3d unit_gradient_to_world_{1.0};  // a gradient per unit-cube length to one per world length
@@ -1702,7 +1704,7 @@ BackendEntry gigavoxels_backend() {
       {"adaptive_step", 8, 1, 64, "DVR: the most a step grows, as T^-1/2 where T is the light left to the ray (a sample behind "
                                   "opacity counts less); 1: a fixed step"},
       {"face_lighting", 1, 0, 1, "lit DVR: 1 weights a segment's two end lightings by where it crosses cell faces (where the "
-                                 "analytic gradient jumps); 0: their mean"},
+                                 "analytic gradient jumps; analytic normals only); 0: their mean"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
