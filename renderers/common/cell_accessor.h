@@ -146,6 +146,29 @@ inline V trilinear_with_gradient(const V c[8], V ux, V uy, V uz, Vec3<V>& g) {
   return c[0] + (y0 + (y1 - y0) * uz);
 }
 
+/// @brief Gradient (voxel units) at p by central or forward differences one voxel apart, each
+/// axis confined to [lo, hi]: one-sided at those bounds, forward turning backward at the upper
+/// one. f0 is the value at p (read by forward differences alone); value(q) the field at q.
+template <typename V, typename Value>
+inline Vec3<V> confined_difference_gradient(const Vec3<V>& p, const V lo[3], const V hi[3], bool central, V f0, Value&& value) {
+  Vec3<V> g;
+  for (int a = 0; a < 3; ++a) {
+    Vec3<V> q1 = p, q0 = p;
+    q1[a] = std::min(p[a] + V(1), hi[a]);
+    q0[a] = central ? std::max(p[a] - V(1), lo[a]) : p[a];
+    if (!central && q1[a] - q0[a] < V(0.5)) q0[a] = std::max(p[a] - V(1), lo[a]);  // at the upper face: backward
+    const V span = q1[a] - q0[a];
+    if (!(span > V(0))) {
+      g[a] = 0;  // a flat axis (1-voxel-thick volume)
+      continue;
+    }
+    const V f1 = value(q1);
+    const V fm = (!central && q0[a] == p[a]) ? f0 : value(q0);
+    g[a] = (f1 - fm) / span;
+  }
+  return g;
+}
+
 /// @brief Continuous sampling of a level at voxel coordinates (clamped into the volume).
 template <typename Stored, typename V>
 class TrilinearSampler {
@@ -198,23 +221,8 @@ class TrilinearSampler {
       plo[a] = V(lo[a]);
       phi[a] = V(std::min(hi[a] + 1, cells_.dims()[a] - 1));
     }
-    Vec3<V> g;
     const V f0 = central ? V(0) : sample_within(p, lo, hi);
-    for (int a = 0; a < 3; ++a) {
-      Vec3<V> q1 = p, q0 = p;
-      q1[a] = std::min(p[a] + V(1), phi[a]);
-      q0[a] = central ? std::max(p[a] - V(1), plo[a]) : p[a];
-      if (!central && q1[a] - q0[a] < V(0.5)) q0[a] = std::max(p[a] - V(1), plo[a]);  // at the upper face: backward
-      const V span = q1[a] - q0[a];
-      if (!(span > V(0))) {
-        g[a] = 0;  // a flat axis (1-voxel-thick volume)
-        continue;
-      }
-      const V f1 = sample_within(q1, lo, hi);
-      const V fm = (!central && q0[a] == p[a]) ? f0 : sample_within(q0, lo, hi);
-      g[a] = (f1 - fm) / span;
-    }
-    return g;
+    return confined_difference_gradient(p, plo, phi, central, f0, [&](const Vec3<V>& q) { return sample_within(q, lo, hi); });
   }
 
   CellAccessor<Stored>& cells() { return cells_; }

@@ -717,7 +717,7 @@ class GigaVoxelsRenderer final : public Renderer {
 
     /// The cell of brick b at brick coordinates l (voxel i + 1 at i; clamped into the brick):
     /// its corner values c, where in it l lies (u), and its lower corner.
-    void brick_cell(const PathNode& b, const float l[3], int64_t cell[3], float u[3], float c[8]) const {
+    void brick_cell(const PathNode& b, const Vec3f& l, int64_t cell[3], float u[3], float c[8]) const {
       const int64_t e = r.m_ + 2;
       const float top = float(e - 1);
       for (int a = 0; a < 3; ++a) {
@@ -731,7 +731,7 @@ class GigaVoxelsRenderer final : public Renderer {
       c[4] = float(q[dz]), c[5] = float(q[dz + 1]), c[6] = float(q[dz + dy]), c[7] = float(q[dz + dy + 1]);
     }
     /// The trilinear value of brick b at brick coordinates l.
-    float brick_value(const PathNode& b, const float l[3]) const {
+    float brick_value(const PathNode& b, const Vec3f& l) const {
       int64_t cell[3];
       float u[3], c[8];
       brick_cell(b, l, cell, u, c);
@@ -740,7 +740,7 @@ class GigaVoxelsRenderer final : public Renderer {
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t, and
     /// where in the brick's cells t fell (at).
     float sample_brick(const PathNode& b, double t, Vec3d* gradient, CellPoint* at = nullptr) const {
-      float l[3];
+      Vec3f l;
       for (int a = 0; a < 3; ++a) l[a] = float((b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5);
       int64_t cell[3];
       float u[3], c[8];
@@ -754,7 +754,7 @@ class GigaVoxelsRenderer final : public Renderer {
         v = trilinear_with_gradient(c, u[0], u[1], u[2], g);
       } else {
         v = trilinear(c, u[0], u[1], u[2]);
-        const float within[3] = {float(cell[0]) + u[0], float(cell[1]) + u[1], float(cell[2]) + u[2]};
+        const Vec3f within{float(cell[0]) + u[0], float(cell[1]) + u[1], float(cell[2]) + u[2]};
         g = difference_gradient(b, within, v, r.normals_ == NormalMethod::central);
       }
       *gradient = Vec3d(g) * (b.scale * double(r.m_));
@@ -768,7 +768,7 @@ class GigaVoxelsRenderer final : public Renderer {
     /// store brick below: in that half voxel, the lower difference reaches that voxel rather
     /// than one further down (the only place the two differ). For the sponge, within the
     /// node's brick. Samples count the values read besides v (raymarch counts 4 or 6 a gradient).
-    Vec3f difference_gradient(const PathNode& b, const float l[3], float v, bool central) const {
+    Vec3f difference_gradient(const PathNode& b, const Vec3f& l, float v, bool central) const {
       const int m = r.m_;
       float lo[3], hi[3];  // where the differences may reach, in brick coordinates
       for (int a = 0; a < 3; ++a) {
@@ -785,23 +785,10 @@ class GigaVoxelsRenderer final : public Renderer {
           hi[a] = l[a] >= 1 ? float(m + 1) : 1.0f;
         }
       }
-      Vec3f g;
-      for (int a = 0; a < 3; ++a) {
-        float q1[3] = {l[0], l[1], l[2]}, q0[3] = {l[0], l[1], l[2]};
-        q1[a] = std::min(l[a] + 1, hi[a]);
-        q0[a] = central ? std::max(l[a] - 1, lo[a]) : l[a];
-        if (!central && q1[a] - q0[a] < 0.5f) q0[a] = std::max(l[a] - 1, lo[a]);  // at the upper face: backward
-        const float span = q1[a] - q0[a];
-        if (!(span > 0)) {
-          g[a] = 0;  // a flat axis (a volume one voxel thick)
-          continue;
-        }
-        const bool reuse_v = !central && q0[a] == l[a];
-        counters.samples += reuse_v ? 1 : 2;
-        const float f1 = brick_value(b, q1), f0 = reuse_v ? v : brick_value(b, q0);
-        g[a] = (f1 - f0) / span;
-      }
-      return g;
+      return confined_difference_gradient(l, lo, hi, central, v, [&](const Vec3f& q) {
+        ++counters.samples;
+        return brick_value(b, q);
+      });
     }
 
     /// The bricks a sample at depth lambda reads: one, or (quadrilinear) the two levels around
