@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <vector>
 
@@ -49,6 +50,7 @@ class PreintegratedTf {
     size_t first = 0;
     while (first < point_.size() && point_[first].tau == 0) ++first;
     clear_up_to_ = first == 0 ? -kInfinity : first == point_.size() ? kInfinity : lo_ + double(first - 1) * dv_;
+    last_ = n - 1;
   }
 
   /// @brief The segment's opacity and colour (not premultiplied) for a value going linearly
@@ -102,24 +104,27 @@ class PreintegratedTf {
   };
   /// The running integrals at table position x, continued past either end with that end's
   /// constant extinction and colour.
+  /// (Indices are signed and the last position kept: size_t conversions and the vectors'
+  /// sizes cost a DVR sample 15 instructions and three branches.)
   Integral integral(double x) const {
-    const size_t last = integral_.size() - 1;
-    if (x <= 0 || x >= double(last)) {
-      const size_t i = x <= 0 ? 0 : last;
+    if (!(x > 0 && x < double(last_))) {  // x is never NaN (position())
+      const int64_t i = x > 0 ? last_ : 0;
       const double d = (x - double(i)) * dv_;
-      return {integral_[i].tau + point_[i].tau * d, integral_[i].ctau + point_[i].color * (point_[i].tau * d)};
+      const Entry& p = point_[size_t(i)];
+      return {integral_[size_t(i)].tau + p.tau * d, integral_[size_t(i)].ctau + p.color * (p.tau * d)};
     }
-    const size_t i = size_t(x);
+    const int64_t i = int64_t(x);
     const double f = x - double(i);
-    const Integral& a = integral_[i];
-    const Integral& b = integral_[i + 1];
-    return {a.tau + (b.tau - a.tau) * f, a.ctau + (b.ctau - a.ctau) * f};
+    const Integral* a = integral_.data() + i;
+    return {a[0].tau + (a[1].tau - a[0].tau) * f, a[0].ctau + (a[1].ctau - a[0].ctau) * f};
   }
   Entry point_at(double x) const {
-    x = std::clamp(x, 0.0, double(point_.size() - 1));
-    const size_t i = std::min(size_t(x), point_.size() - 1), j = std::min(i + 1, point_.size() - 1);
+    x = std::clamp(x, 0.0, double(last_));
+    const int64_t i = int64_t(x), j = std::min(i + 1, last_);
     const double f = x - double(i);
-    return {point_[i].color + (point_[j].color - point_[i].color) * f, point_[i].tau + (point_[j].tau - point_[i].tau) * f};
+    const Entry& a = point_[size_t(i)];
+    const Entry& b = point_[size_t(j)];
+    return {a.color + (b.color - a.color) * f, a.tau + (b.tau - a.tau) * f};
   }
 
   static constexpr double kInfinity = std::numeric_limits<double>::infinity();
@@ -127,6 +132,7 @@ class PreintegratedTf {
   double lo_ = 0, scale_ = 0;
   double dv_ = 0;  // value per table entry
   double clear_up_to_ = -kInfinity;  // a segment whose values all lie at or below this is transparent
+  int64_t last_ = 0;                  // the last table position
   std::vector<Integral> integral_;
   std::vector<Entry> point_;
 };
