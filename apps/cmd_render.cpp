@@ -349,8 +349,17 @@ void run_bench(const BenchOptions& o) {
     std::cerr << "brickyard: warning: " << e.what() << "\n";
     paths.markdown = (fs::path(o.out) / "bench.md").string();
     paths.csv = (fs::path(o.out) / "bench.csv").string();
+    paths.equal_error_csv = (fs::path(o.out) / "equal-error.csv").string();
+  }
+  const std::vector<EqualErrorRow> equal_error = equal_error_rows(report.rows);
+  if (!equal_error.empty()) std::cout << "at equal error:\n";
+  for (const EqualErrorRow& e : equal_error) {
+    const char* mark = e.bound == EqualErrorRow::Bound::at_most ? ">= " : e.bound == EqualErrorRow::Bound::at_least ? "<= " : "";
+    std::cout << fmt::format("  {:<10} at {} {} (RMSE {:.4g}): {}{:.2f}x its speed\n", e.backend, e.against, e.against_quality,
+                             e.rmse, mark, e.speedup());
   }
   std::cout << fmt::format("report: {}\n  table {}\n", paths.markdown, paths.csv);
+  if (!paths.equal_error_csv.empty()) std::cout << fmt::format("  equal error {}\n", paths.equal_error_csv);
   if (!paths.error_plot.empty()) std::cout << fmt::format("  chart {}\n", paths.error_plot);
   if (!paths.contact_sheet.empty()) std::cout << fmt::format("  images {}\n", paths.contact_sheet);
 }
@@ -386,7 +395,7 @@ void add_render_commands(CLI::App& app) {
     cmd->add_option("--frame", o->frame, "Frame of the scene's camera path to render (default 0)");
     cmd->add_option("--size", o->size, "Image size W,H instead of the scene's");
     cmd->add_option("--dataset", o->dataset, "Store to render instead of the scene's dataset");
-    cmd->add_option("--out", o->out, "Report directory (bench.md, bench.csv, error-vs-time.png, contact-sheet.png, images/)");
+    cmd->add_option("--out", o->out, "Report directory (bench.md, bench.csv, equal-error.csv, error-vs-time.png, contact-sheet.png, images/)");
     cmd->callback([o] { run_bench(*o); });
   }
 }

@@ -133,6 +133,24 @@ std::string csv_text(const BenchReport& report, const std::vector<bool>& on_fron
   return out;
 }
 
+const char* bound_name(EqualErrorRow::Bound b) {
+  switch (b) {
+    case EqualErrorRow::Bound::interpolated: return "interpolated";
+    case EqualErrorRow::Bound::at_most: return "at_most";
+    case EqualErrorRow::Bound::at_least: return "at_least";
+  }
+  return "?";
+}
+
+std::string equal_error_csv_text(const std::vector<EqualErrorRow>& rows) {
+  std::string out = "backend,against,against_quality,rmse,against_time_s,backend_time_s,bound,speedup\n";
+  for (const EqualErrorRow& e : rows)
+    out += fmt::format("{},{},{},{},{},{},{},{}\n", csv_field(e.backend), csv_field(e.against), csv_field(e.against_quality),
+                       csv_number(e.rmse), csv_number(e.against_time_s), csv_number(e.backend_time_s), bound_name(e.bound),
+                       csv_number(e.speedup()));
+  return out;
+}
+
 // --- error against time -----------------------------------------------------------------------
 
 std::string error_plot_script(const BenchReport& report, const std::vector<size_t>& front) {
@@ -290,8 +308,28 @@ std::string distinct(const std::vector<BenchRow>& rows, F&& f) {
   return out;
 }
 
+/// The equal-error table: a back end's time as "≤ 12.3" / "≥ 12.3" / "12.3" ms, and the speed-up likewise.
+std::string equal_error_markdown(const std::vector<EqualErrorRow>& rows) {
+  if (rows.empty()) return "";
+  std::string s =
+      "## At equal error\n\n"
+      "Each back end's warm time at the RMSE of every row of another, interpolated log-log along its own Pareto "
+      "front; ≤ where every row of it is more accurate (its fastest row's time), ≥ where none is that accurate "
+      "(its most accurate row's time). Speed-up: the other's time over this one's (above 1: faster).\n\n"
+      "| Backend | Against | At RMSE of | RMSE | Against ms | Backend ms | Speed-up |\n"
+      "|---|---|---|--:|--:|--:|--:|\n";
+  for (const EqualErrorRow& e : rows) {
+    const char* time_mark = e.bound == EqualErrorRow::Bound::at_most ? "≤ " : e.bound == EqualErrorRow::Bound::at_least ? "≥ " : "";
+    const char* speed_mark = e.bound == EqualErrorRow::Bound::at_most ? "≥ " : e.bound == EqualErrorRow::Bound::at_least ? "≤ " : "";
+    s += fmt::format("| {} | {} | {} | {:.4g} | {} | {}{} | {}{:.2f}× |\n", md_cell(e.backend), md_cell(e.against),
+                     md_cell(e.against_quality.empty() ? e.against : e.against_quality), e.rmse, ms(e.against_time_s),
+                     time_mark, ms(e.backend_time_s), speed_mark, e.speedup());
+  }
+  return s + "\n";
+}
+
 std::string markdown_text(const std::string& dir, const BenchReport& report, const std::vector<bool>& on_front,
-                          const BenchReportPaths& written) {
+                          const std::vector<EqualErrorRow>& equal_error, const BenchReportPaths& written) {
   const auto& rows = report.rows;
   std::string s = fmt::format("# Bench: {}\n\n", md_cell(report.title.empty() ? "bench" : report.title));
   if (!rows.empty()) {
@@ -335,6 +373,7 @@ std::string markdown_text(const std::string& dir, const BenchReport& report, con
     for (size_t i = 0; i < nonfinite.size(); ++i) s += (i ? ", " : " ") + md_cell(nonfinite[i]);
     s += " pixels; each counts as the largest error.\n\n";
   }
+  s += equal_error_markdown(equal_error);
   s += "Legend:\n\n"
        "- **Cold**: a frame that starts with empty caches; **warm**: the same frame again with the caches filled. "
        "Median and 95th percentile over the runs.\n"
@@ -375,6 +414,55 @@ std::vector<size_t> pareto_front(const std::vector<BenchRow>& rows) {
   return front;
 }
 
+std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows) {
+  auto comparable = [](const BenchRow& r) {
+    return !r.is_reference && std::isfinite(r.warm_median_s) && r.warm_median_s > 0 && std::isfinite(r.error.rmse) &&
+           r.error.rmse > 0;
+  };
+  std::vector<std::string> backends;
+  for (const BenchRow& r : rows)
+    if (comparable(r) && std::find(backends.begin(), backends.end(), r.backend) == backends.end()) backends.push_back(r.backend);
+
+  std::vector<EqualErrorRow> out;
+  for (const std::string& backend : backends) {
+    // Its curve: its own Pareto front, fastest first (so error falls strictly along it).
+    std::vector<BenchRow> own;
+    for (const BenchRow& r : rows)
+      if (comparable(r) && r.backend == backend) own.push_back(r);
+    std::vector<const BenchRow*> curve;
+    for (size_t i : pareto_front(own)) curve.push_back(&own[i]);
+    std::sort(curve.begin(), curve.end(), [](const BenchRow* a, const BenchRow* b) {
+      return a->warm_median_s < b->warm_median_s || (a->warm_median_s == b->warm_median_s && a->error.rmse > b->error.rmse);
+    });
+    for (const std::string& against : backends) {
+      if (against == backend) continue;
+      for (const BenchRow& r : rows) {
+        if (!comparable(r) || r.backend != against) continue;
+        EqualErrorRow e;
+        e.backend = backend, e.against = against, e.against_quality = r.quality;
+        e.rmse = r.error.rmse, e.against_time_s = r.warm_median_s;
+        if (e.rmse >= curve.front()->error.rmse) {
+          e.backend_time_s = curve.front()->warm_median_s;
+          e.bound = e.rmse == curve.front()->error.rmse ? EqualErrorRow::Bound::interpolated : EqualErrorRow::Bound::at_most;
+        } else if (e.rmse < curve.back()->error.rmse) {
+          e.backend_time_s = curve.back()->warm_median_s;
+          e.bound = EqualErrorRow::Bound::at_least;
+        } else {
+          size_t i = 0;  // curve[i] less accurate than rmse, curve[i + 1] at least as accurate
+          while (curve[i + 1]->error.rmse > e.rmse) ++i;
+          const BenchRow& a = *curve[i];
+          const BenchRow& b = *curve[i + 1];
+          const double f = std::log(a.error.rmse / e.rmse) / std::log(a.error.rmse / b.error.rmse);
+          e.backend_time_s = f == 1 ? b.warm_median_s : a.warm_median_s * std::pow(b.warm_median_s / a.warm_median_s, f);
+          e.bound = EqualErrorRow::Bound::interpolated;
+        }
+        out.push_back(std::move(e));
+      }
+    }
+  }
+  return out;
+}
+
 BenchReportPaths write_bench_report(const std::string& dir, const BenchReport& report) {
   std::error_code ec;
   fs::create_directories(dir, ec);
@@ -388,6 +476,9 @@ BenchReportPaths write_bench_report(const std::string& dir, const BenchReport& r
   BenchReportPaths paths;
   paths.csv = in_dir("bench.csv");
   write_text(paths.csv, csv_text(report, on_front));
+  const std::vector<EqualErrorRow> equal_error = equal_error_rows(report.rows);
+  paths.equal_error_csv = in_dir("equal-error.csv");
+  write_text(paths.equal_error_csv, equal_error_csv_text(equal_error));
 
   // The charts: a failure is remembered, bench.md is written without that chart, then it is
   // thrown. A chart not drawn this time is removed, so the directory never mixes two runs.
@@ -424,7 +515,7 @@ BenchReportPaths write_bench_report(const std::string& dir, const BenchReport& r
     fs::remove(in_dir("contact-sheet.png"), ec);
 
   paths.markdown = in_dir("bench.md");
-  write_text(paths.markdown, markdown_text(dir, report, on_front, paths));
+  write_text(paths.markdown, markdown_text(dir, report, on_front, equal_error, paths));
   if (chart_error) throw *chart_error;
   return paths;
 }

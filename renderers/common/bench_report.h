@@ -39,10 +39,40 @@ struct BenchReport {
   std::vector<BenchRow> rows;
 };
 
+/// @brief One back end's warm frame time at the error another back end reached in one of its
+/// rows: the two back ends compared at equal error.
+struct EqualErrorRow {
+  /// How backend_time_s was found on the back end's curve (its own Pareto front: more time,
+  /// less error).
+  enum class Bound {
+    interpolated,  ///< between its two rows around the error, log-log (or at one row of that error)
+    at_most,       ///< every row of it is more accurate: its fastest row's time, an upper bound
+    at_least,      ///< no row of it is this accurate: its most accurate row's time, a lower bound
+  };
+  std::string backend;          ///< the back end timed at `against`'s error
+  std::string against;          ///< the back end whose row sets the error
+  std::string against_quality;  ///< that row's quality label
+  double rmse = 0;              ///< that row's colour RMSE
+  double against_time_s = 0;    ///< that row's warm median
+  double backend_time_s = 0;    ///< backend's warm median at rmse, or its bound
+  Bound bound = Bound::interpolated;
+  /// against_time_s / backend_time_s: above 1 where `backend` is faster (a lower bound when
+  /// bound is at_most, an upper one when it is at_least).
+  double speedup() const { return against_time_s / backend_time_s; }
+};
+
+/// @brief Every ordered pair of back ends (in the order they first appear, reference rows
+/// left out), each compared at the error of every row of the second: the first's warm time
+/// there, interpolated log-log along its own Pareto front (a power law of time in error is
+/// matched exactly), or bounded by its fastest or most accurate row outside the errors it
+/// reached. Rows without a positive, finite time and RMSE take no part.
+std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows);
+
 /// @brief The files write_bench_report() wrote; an entry is empty when that file was not
 /// written (contact_sheet when no row's image exists).
 struct BenchReportPaths {
   std::string csv;              ///< DIR/bench.csv
+  std::string equal_error_csv;  ///< DIR/equal-error.csv (equal_error_rows(); a header alone when there are none)
   std::string markdown;         ///< DIR/bench.md
   std::string error_plot;       ///< DIR/error-vs-time.png
   std::string contact_sheet;    ///< DIR/contact-sheet.png
@@ -65,9 +95,12 @@ std::vector<size_t> pareto_front(const std::vector<BenchRow>& rows);
 ///   with zero error sits on the bottom edge, labelled "(RMSE 0)";
 /// - DIR/contact-sheet.png: the rows' images in a grid, each titled "backend quality, time,
 ///   RMSE" (rows whose image is empty or missing are left out; not written when none is left);
+/// - DIR/equal-error.csv: equal_error_rows(), one line each (backend, against,
+///   against_quality, rmse, against_time_s, backend_time_s, bound, speedup);
 /// - DIR/bench.md: title, a summary, the chart, a table (backend, quality, cold and warm
 ///   median/p95 ms, rays/s/core, bytes read, RMSE, PSNR, SSIM, depth mean/p99 voxels, normal
-///   mean degrees, coverage mismatch %, Pareto mark, image link), a legend and the contact sheet.
+///   mean degrees, coverage mismatch %, Pareto mark, image link), the equal-error table when
+///   there are two back ends to compare, a legend and the contact sheet.
 /// The charts need gnuplot (package gnuplot-nox).
 /// A chart not drawn this time is removed if an earlier run left one, so the directory never
 /// mixes two runs.

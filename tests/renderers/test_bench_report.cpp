@@ -142,6 +142,129 @@ TEST(ParetoFront, IgnoresUnmeasuredRowsAndMayBeEmpty) {
   EXPECT_TRUE(pareto_front({}).empty());
 }
 
+const EqualErrorRow* find_equal_error(const std::vector<EqualErrorRow>& rows, const std::string& backend,
+                                      const std::string& against, const std::string& quality) {
+  for (const EqualErrorRow& e : rows)
+    if (e.backend == backend && e.against == against && e.against_quality == quality) return &e;
+  return nullptr;
+}
+
+TEST(EqualError, MatchesAPowerLawExactlyAndBoundsOutsideTheSweep) {
+  // fast: time = 1e-4 / rmse at 0.01, 0.004, 0.002; a dominated row and unmeasured rows take no part.
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<BenchRow> rows = {reference_row(5.0),
+                                      row("fast", "q=1", 1, 0.010, 0.010),
+                                      row("fast", "q=2", 2, 0.025, 0.004),
+                                      row("fast", "q=3", 3, 0.050, 0.002),
+                                      row("fast", "q=slow", 4, 0.060, 0.005),  // dominated by q=2
+                                      row("fast", "q=nan", 5, nan, 0.001),
+                                      row("slow", "s=1", 1, 0.100, 0.020),     // less accurate than all of fast
+                                      row("slow", "s=2", 2, 0.200, 0.008),
+                                      row("slow", "s=3", 3, 0.400, 0.004),     // exactly fast's q=2
+                                      row("slow", "s=4", 4, 0.800, 0.001),     // more accurate than all of fast
+                                      row("slow", "s=0", 5, 0.900, 0.0)};      // zero error: no log
+  const std::vector<EqualErrorRow> eq = equal_error_rows(rows);
+  ASSERT_EQ(eq.size(), 4u + 4u);  // fast at slow's 4 measured rows, slow at fast's 4
+  const EqualErrorRow* e = find_equal_error(eq, "fast", "slow", "s=2");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  EXPECT_NEAR(e->backend_time_s, 1e-4 / 0.008, 1e-12);
+  EXPECT_NEAR(e->speedup(), 0.200 / (1e-4 / 0.008), 1e-9);
+  e = find_equal_error(eq, "fast", "slow", "s=3");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.025);
+  e = find_equal_error(eq, "fast", "slow", "s=1");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::at_most);  // its fastest row is already more accurate
+  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.010);
+  EXPECT_DOUBLE_EQ(e->speedup(), 10.0);
+  e = find_equal_error(eq, "fast", "slow", "s=4");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::at_least);  // never that accurate: more than its best row's time
+  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.050);
+  EXPECT_EQ(find_equal_error(eq, "fast", "slow", "s=0"), nullptr);
+  EXPECT_EQ(find_equal_error(eq, "slow", "fast", "q=nan"), nullptr);
+  // The other way: slow at fast's errors, along slow's own curve (0.020 -> 0.008 -> 0.004 -> 0.001).
+  e = find_equal_error(eq, "slow", "fast", "q=1");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  const double f = std::log(0.020 / 0.010) / std::log(0.020 / 0.008);
+  EXPECT_NEAR(e->backend_time_s, 0.100 * std::pow(2.0, f), 1e-12);
+  e = find_equal_error(eq, "slow", "fast", "q=slow");  // a dominated row is still compared against
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  // One back end, or none measured: nothing to compare.
+  EXPECT_TRUE(equal_error_rows({reference_row(1.0), row("fast", "q=1", 1, 0.01, 0.01), row("fast", "q=2", 2, 0.02, 0.005)}).empty());
+  EXPECT_TRUE(equal_error_rows({}).empty());
+}
+
+TEST(EqualError, TheGigaVoxelsDvrBenchmarkOfStop21) {
+  // The figures the issue-7 note quotes (fBm 1024^3 u16, 512x512, warm medians): gigavoxels
+  // 1.50x, 2.17x and 3.02x raymarch at raymarch's steps 1, 0.5 and 0.3.
+  const std::vector<BenchRow> rows = {
+      row("gigavoxels", "step=1", 1, 0.930, 0.003435), row("gigavoxels", "step=0.5", 0.5, 1.25, 0.002108),
+      row("gigavoxels", "step=0.3", 0.3, 1.72, 0.00188), row("raymarch", "step=1", 1, 1.54, 0.002921),
+      row("raymarch", "step=0.5", 0.5, 2.62, 0.002237), row("raymarch", "step=0.3", 0.3, 3.95, 0.002075)};
+  const std::vector<EqualErrorRow> eq = equal_error_rows(rows);
+  const double expected[] = {1.50, 2.17, 3.02};
+  const char* steps[] = {"step=1", "step=0.5", "step=0.3"};
+  for (int i = 0; i < 3; ++i) {
+    const EqualErrorRow* e = find_equal_error(eq, "gigavoxels", "raymarch", steps[i]);
+    ASSERT_NE(e, nullptr) << steps[i];
+    EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated) << steps[i];
+    EXPECT_NEAR(e->speedup(), expected[i], 0.01) << steps[i];
+  }
+  // raymarch at gigavoxels' step=1 error: every raymarch row is more accurate.
+  const EqualErrorRow* e = find_equal_error(eq, "raymarch", "gigavoxels", "step=1");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::at_most);
+  EXPECT_DOUBLE_EQ(e->backend_time_s, 1.54);
+}
+
+TEST(BenchReport, EqualErrorIsWrittenAsCsvAndAMarkdownTable) {
+  testing::TempDir dir;
+  const BenchReport report = sample_report(dir);
+  BenchReportPaths paths;
+  try {
+    paths = write_bench_report(dir.path().string(), report);
+  } catch (const Error& e) {
+    ASSERT_EQ(e.code(), Errc::unsupported) << e.what();
+  }
+  const auto eq = equal_error_rows(report.rows);
+  // raymarch at dda's one measured row; dda (one row of 0.03) at raymarch's three.
+  ASSERT_EQ(eq.size(), 4u);
+  const auto records = parse_csv(testing::read_file(dir.file("equal-error.csv")));
+  ASSERT_EQ(records.size(), eq.size() + 1);
+  EXPECT_EQ(records[0], (std::vector<std::string>{"backend", "against", "against_quality", "rmse", "against_time_s",
+                                                   "backend_time_s", "bound", "speedup"}));
+  for (size_t i = 1; i < records.size(); ++i) {
+    ASSERT_EQ(records[i].size(), 8u);
+    EXPECT_EQ(records[i][6], i == 1 ? "interpolated" : i == 2 ? "at_most" : "at_least") << i;
+    EXPECT_DOUBLE_EQ(std::stod(records[i][7]), eq[i - 1].speedup());
+  }
+  EXPECT_EQ(records[2][2], "step=1, lod=1");  // the comma survives quoting
+  const std::string md = testing::read_file(dir.file("bench.md"));
+  const size_t section = md.find("## At equal error");
+  ASSERT_NE(section, std::string::npos) << md;
+  const auto table = lines_starting_with(md.substr(section), "|");
+  ASSERT_EQ(table.size(), eq.size() + 2);
+  EXPECT_NE(table[3].find("| ≤ 30.0 | ≥ "), std::string::npos) << table[3];  // dda at raymarch step=1
+  EXPECT_NE(table[4].find("| ≥ 30.0 | ≤ "), std::string::npos) << table[4];  // dda at raymarch step=0.5
+
+  // One back end: a header-only CSV and no section.
+  testing::TempDir one;
+  BenchReport single;
+  single.rows = {reference_row(1.0), row("raymarch", "step=1", 1, 0.01, 0.02)};
+  try {
+    write_bench_report(one.path().string(), single);
+  } catch (const Error& e) {
+    ASSERT_EQ(e.code(), Errc::unsupported) << e.what();
+  }
+  EXPECT_EQ(parse_csv(testing::read_file(one.file("equal-error.csv"))).size(), 1u);
+  EXPECT_EQ(testing::read_file(one.file("bench.md")).find("At equal error"), std::string::npos);
+}
+
 TEST(GnuplotQuote, DoublesSingleQuotesAndRejectsLineBreaks) {
   EXPECT_EQ(gnuplot_quote("plain"), "'plain'");
   EXPECT_EQ(gnuplot_quote("it's \"x\" \\n"), "'it''s \"x\" \\n'");
@@ -190,7 +313,7 @@ TEST(BenchReport, MarkdownHasOneTableLinePerRow) {
     ASSERT_EQ(e.code(), Errc::unsupported) << e.what();
   }
   const std::string md = testing::read_file(dir.file("bench.md"));
-  const auto table = lines_starting_with(md, "|");
+  const auto table = lines_starting_with(md.substr(0, md.find("## At equal error")), "|");
   ASSERT_EQ(table.size(), report.rows.size() + 2) << md;  // header, alignment, rows
   EXPECT_NE(md.find("sample scene"), std::string::npos);
   EXPECT_NE(md.find("Legend"), std::string::npos);
