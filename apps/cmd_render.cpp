@@ -355,8 +355,9 @@ void run_bench(const BenchOptions& o) {
   if (!equal_error.empty()) std::cout << "at equal error:\n";
   for (const EqualErrorRow& e : equal_error) {
     const char* mark = e.bound == EqualErrorRow::Bound::at_most ? ">= " : e.bound == EqualErrorRow::Bound::at_least ? "<= " : "";
-    std::cout << fmt::format("  {:<10} at {} {} (RMSE {:.4g}): {}{:.2f}x its speed\n", e.backend, e.against, e.against_quality,
-                             e.rmse, mark, e.speedup());
+    std::cout << fmt::format("  {:<10} at {} (RMSE {:.4g}): {}{:.2f}x as fast as {}\n", e.backend,
+                             e.against_quality.empty() ? e.against : e.against + " " + e.against_quality, e.rmse, mark,
+                             e.speedup(), e.against);
   }
   std::cout << fmt::format("report: {}\n  table {}\n", paths.markdown, paths.csv);
   if (!paths.equal_error_csv.empty()) std::cout << fmt::format("  equal error {}\n", paths.equal_error_csv);

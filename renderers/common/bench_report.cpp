@@ -143,7 +143,7 @@ const char* bound_name(EqualErrorRow::Bound b) {
 }
 
 std::string equal_error_csv_text(const std::vector<EqualErrorRow>& rows) {
-  std::string out = "backend,against,against_quality,rmse,against_time_s,backend_time_s,bound,speedup\n";
+  std::string out = "backend,against,against_quality,rmse,against_time_s,backend_time_s,time_bound,speedup\n";
   for (const EqualErrorRow& e : rows)
     out += fmt::format("{},{},{},{},{},{},{},{}\n", csv_field(e.backend), csv_field(e.against), csv_field(e.against_quality),
                        csv_number(e.rmse), csv_number(e.against_time_s), csv_number(e.backend_time_s), bound_name(e.bound),
@@ -314,7 +314,7 @@ std::string equal_error_markdown(const std::vector<EqualErrorRow>& rows) {
   std::string s =
       "## At equal error\n\n"
       "Each back end's warm time at the RMSE of every row of another, interpolated log-log along its own Pareto "
-      "front; ≤ where every row of it is more accurate (its fastest row's time), ≥ where none is that accurate "
+      "front; ≤ where its fastest row is already more accurate (that row's time), ≥ where none is that accurate "
       "(its most accurate row's time). Speed-up: the other's time over this one's (above 1: faster).\n\n"
       "| Backend | Against | At RMSE of | RMSE | Against ms | Backend ms | Speed-up |\n"
       "|---|---|---|--:|--:|--:|--:|\n";
@@ -425,7 +425,8 @@ std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows) {
 
   std::vector<EqualErrorRow> out;
   for (const std::string& backend : backends) {
-    // Its curve: its own Pareto front, fastest first (so error falls strictly along it).
+    // Its curve: its own Pareto front, fastest first (error never rises along it; equal times
+    // only for identical rows).
     std::vector<BenchRow> own;
     for (const BenchRow& r : rows)
       if (comparable(r) && r.backend == backend) own.push_back(r);
@@ -453,6 +454,7 @@ std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows) {
           const BenchRow& a = *curve[i];
           const BenchRow& b = *curve[i + 1];
           const double f = std::log(a.error.rmse / e.rmse) / std::log(a.error.rmse / b.error.rmse);
+          // At b's own error, b's own time, not pow's rounding of it.
           e.backend_time_s = f == 1 ? b.warm_median_s : a.warm_median_s * std::pow(b.warm_median_s / a.warm_median_s, f);
           e.bound = EqualErrorRow::Bound::interpolated;
         }

@@ -46,7 +46,7 @@ struct EqualErrorRow {
   /// less error).
   enum class Bound {
     interpolated,  ///< between its two rows around the error, log-log (or at one row of that error)
-    at_most,       ///< every row of it is more accurate: its fastest row's time, an upper bound
+    at_most,       ///< its fastest row is already more accurate: that row's time, an upper bound
     at_least,      ///< no row of it is this accurate: its most accurate row's time, a lower bound
   };
   std::string backend;          ///< the back end timed at `against`'s error
@@ -61,8 +61,7 @@ struct EqualErrorRow {
   double speedup() const { return against_time_s / backend_time_s; }
 };
 
-/// @brief Every ordered pair of back ends (in the order they first appear, reference rows
-/// left out), each compared at the error of every row of the second: the first's warm time
+/// @brief Every ordered pair of back ends (in the order of their first comparable rows), each compared at the error of every row of the second: the first's warm time
 /// there, interpolated log-log along its own Pareto front (a power law of time in error is
 /// matched exactly), or bounded by its fastest or most accurate row outside the errors it
 /// reached. Rows without a positive, finite time and RMSE take no part.
@@ -96,7 +95,8 @@ std::vector<size_t> pareto_front(const std::vector<BenchRow>& rows);
 /// - DIR/contact-sheet.png: the rows' images in a grid, each titled "backend quality, time,
 ///   RMSE" (rows whose image is empty or missing are left out; not written when none is left);
 /// - DIR/equal-error.csv: equal_error_rows(), one line each (backend, against,
-///   against_quality, rmse, against_time_s, backend_time_s, bound, speedup);
+///   against_quality, rmse, against_time_s, backend_time_s, time_bound, speedup; time_bound
+///   bounds backend_time_s, so at_most makes the speed-up a lower bound and at_least an upper one);
 /// - DIR/bench.md: title, a summary, the chart, a table (backend, quality, cold and warm
 ///   median/p95 ms, rays/s/core, bytes read, RMSE, PSNR, SSIM, depth mean/p99 voxels, normal
 ///   mean degrees, coverage mismatch %, Pareto mark, image link), the equal-error table when

@@ -194,6 +194,20 @@ TEST(EqualError, MatchesAPowerLawExactlyAndBoundsOutsideTheSweep) {
   e = find_equal_error(eq, "slow", "fast", "q=slow");  // a dominated row is still compared against
   ASSERT_NE(e, nullptr);
   EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  // A back end of one row, at exactly its error; duplicate rows (both on its front) change nothing.
+  const std::vector<EqualErrorRow> single = equal_error_rows(
+      {row("one", "", 0, 0.3, 0.004), row("two", "t=1", 1, 0.1, 0.01), row("two", "t=2", 2, 0.2, 0.004),
+       row("two", "t=2 again", 2, 0.2, 0.004), row("two", "t=3", 3, 0.4, 0.002), row("two", "t=inf", 4, std::numeric_limits<double>::infinity(), 0.001)});
+  e = find_equal_error(single, "one", "two", "t=2");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.3);
+  e = find_equal_error(single, "two", "one", "");
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.2);
+  EXPECT_EQ(find_equal_error(single, "one", "two", "t=inf"), nullptr);
+  EXPECT_EQ(single.size(), 4u + 1u);
   // One back end, or none measured: nothing to compare.
   EXPECT_TRUE(equal_error_rows({reference_row(1.0), row("fast", "q=1", 1, 0.01, 0.01), row("fast", "q=2", 2, 0.02, 0.005)}).empty());
   EXPECT_TRUE(equal_error_rows({}).empty());
@@ -237,7 +251,7 @@ TEST(BenchReport, EqualErrorIsWrittenAsCsvAndAMarkdownTable) {
   const auto records = parse_csv(testing::read_file(dir.file("equal-error.csv")));
   ASSERT_EQ(records.size(), eq.size() + 1);
   EXPECT_EQ(records[0], (std::vector<std::string>{"backend", "against", "against_quality", "rmse", "against_time_s",
-                                                   "backend_time_s", "bound", "speedup"}));
+                                                   "backend_time_s", "time_bound", "speedup"}));
   for (size_t i = 1; i < records.size(); ++i) {
     ASSERT_EQ(records[i].size(), 8u);
     EXPECT_EQ(records[i][6], i == 1 ? "interpolated" : i == 2 ? "at_most" : "at_least") << i;
