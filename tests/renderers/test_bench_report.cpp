@@ -149,6 +149,15 @@ const EqualErrorRow* find_equal_error(const std::vector<EqualErrorRow>& rows, co
   return nullptr;
 }
 
+/// `backend` at the error of `against`'s row `quality`: found, with this bound and time.
+void expect_equal_error(const std::vector<EqualErrorRow>& rows, const std::string& backend, const std::string& against,
+                        const std::string& quality, EqualErrorRow::Bound bound, double time_s) {
+  const EqualErrorRow* e = find_equal_error(rows, backend, against, quality);
+  ASSERT_NE(e, nullptr) << backend << " at " << against << " " << quality;
+  EXPECT_EQ(e->bound, bound) << backend << " at " << against << " " << quality;
+  EXPECT_NEAR(e->backend_time_s, time_s, 1e-12) << backend << " at " << against << " " << quality;
+}
+
 TEST(EqualError, MatchesAPowerLawExactlyAndBoundsOutsideTheSweep) {
   // fast: time = 1e-4 / rmse at 0.01, 0.004, 0.002; a dominated row and unmeasured rows take no part.
   const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -165,47 +174,27 @@ TEST(EqualError, MatchesAPowerLawExactlyAndBoundsOutsideTheSweep) {
                                       row("slow", "s=0", 5, 0.900, 0.0)};      // zero error: no log
   const std::vector<EqualErrorRow> eq = equal_error_rows(rows);
   ASSERT_EQ(eq.size(), 4u + 4u);  // fast at slow's 4 measured rows, slow at fast's 4
-  const EqualErrorRow* e = find_equal_error(eq, "fast", "slow", "s=2");
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
-  EXPECT_NEAR(e->backend_time_s, 1e-4 / 0.008, 1e-12);
-  EXPECT_NEAR(e->speedup(), 0.200 / (1e-4 / 0.008), 1e-9);
-  e = find_equal_error(eq, "fast", "slow", "s=3");
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
-  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.025);
-  e = find_equal_error(eq, "fast", "slow", "s=1");
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::at_most);  // its fastest row is already more accurate
-  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.010);
-  EXPECT_DOUBLE_EQ(e->speedup(), 10.0);
-  e = find_equal_error(eq, "fast", "slow", "s=4");
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::at_least);  // never that accurate: more than its best row's time
-  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.050);
+  using Bound = EqualErrorRow::Bound;
+  expect_equal_error(eq, "fast", "slow", "s=2", Bound::interpolated, 1e-4 / 0.008);
+  EXPECT_NEAR(find_equal_error(eq, "fast", "slow", "s=2")->speedup(), 0.200 / (1e-4 / 0.008), 1e-9);
+  expect_equal_error(eq, "fast", "slow", "s=3", Bound::interpolated, 0.025);
+  expect_equal_error(eq, "fast", "slow", "s=1", Bound::at_most, 0.010);  // its fastest row is already more accurate
+  EXPECT_DOUBLE_EQ(find_equal_error(eq, "fast", "slow", "s=1")->speedup(), 10.0);
+  expect_equal_error(eq, "fast", "slow", "s=4", Bound::at_least, 0.050);  // never that accurate
   EXPECT_EQ(find_equal_error(eq, "fast", "slow", "s=0"), nullptr);
   EXPECT_EQ(find_equal_error(eq, "slow", "fast", "q=nan"), nullptr);
   // The other way: slow at fast's errors, along slow's own curve (0.020 -> 0.008 -> 0.004 -> 0.001).
-  e = find_equal_error(eq, "slow", "fast", "q=1");
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
-  const double f = std::log(0.020 / 0.010) / std::log(0.020 / 0.008);
-  EXPECT_NEAR(e->backend_time_s, 0.100 * std::pow(2.0, f), 1e-12);
-  e = find_equal_error(eq, "slow", "fast", "q=slow");  // a dominated row is still compared against
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
+  expect_equal_error(eq, "slow", "fast", "q=1", Bound::interpolated,
+                     0.100 * std::pow(2.0, std::log(0.020 / 0.010) / std::log(0.020 / 0.008)));
+  // A dominated row is still compared against: 0.005 lies where slow's time is 0.0016 / rmse.
+  expect_equal_error(eq, "slow", "fast", "q=slow", Bound::interpolated, 0.0016 / 0.005);
   // A back end of one row, at exactly its error; duplicate rows (both on its front) change nothing.
   const std::vector<EqualErrorRow> single = equal_error_rows(
       {row("one", "", 0, 0.3, 0.004), row("two", "t=1", 1, 0.1, 0.01), row("two", "t=2", 2, 0.2, 0.004),
-       row("two", "t=2 again", 2, 0.2, 0.004), row("two", "t=3", 3, 0.4, 0.002), row("two", "t=inf", 4, std::numeric_limits<double>::infinity(), 0.001)});
-  e = find_equal_error(single, "one", "two", "t=2");
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
-  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.3);
-  e = find_equal_error(single, "two", "one", "");
-  ASSERT_NE(e, nullptr);
-  EXPECT_EQ(e->bound, EqualErrorRow::Bound::interpolated);
-  EXPECT_DOUBLE_EQ(e->backend_time_s, 0.2);
+       row("two", "t=2 again", 2, 0.2, 0.004), row("two", "t=3", 3, 0.4, 0.002),
+       row("two", "t=inf", 4, std::numeric_limits<double>::infinity(), 0.001)});
+  expect_equal_error(single, "one", "two", "t=2", Bound::interpolated, 0.3);
+  expect_equal_error(single, "two", "one", "", Bound::interpolated, 0.2);
   EXPECT_EQ(find_equal_error(single, "one", "two", "t=inf"), nullptr);
   EXPECT_EQ(single.size(), 4u + 1u);
   // One back end, or none measured: nothing to compare.
