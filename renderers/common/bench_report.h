@@ -61,10 +61,11 @@ struct EqualErrorRow {
   double speedup() const { return against_time_s / backend_time_s; }
 };
 
-/// @brief Every ordered pair of back ends (in the order of their first comparable rows), each compared at the error of every row of the second: the first's warm time
-/// there, interpolated log-log along its own Pareto front (a power law of time in error is
-/// matched exactly), or bounded by its fastest or most accurate row outside the errors it
-/// reached. Rows without a positive, finite time and RMSE take no part.
+/// @brief Every ordered pair of back ends (in the order of their first comparable rows),
+/// each compared at the error of every row of the second: the first's warm time there,
+/// interpolated log-log along its own Pareto front (a power law of time in error is matched
+/// exactly), or bounded by its fastest or most accurate row outside the errors it reached.
+/// Rows without a positive, finite time and RMSE take no part.
 std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows);
 
 /// @brief The files write_bench_report() wrote; an entry is empty when that file was not

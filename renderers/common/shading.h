@@ -57,7 +57,6 @@ class ShadingModel {
   /// both of its ends).
   struct Lighting {
     float diffuse = 0, specular = 0;
-    Lighting mean(const Lighting& o) const { return {0.5f * (diffuse + o.diffuse), 0.5f * (specular + o.specular)}; }
     /// @brief This lighting with weight w, o with weight 1 - w.
     Lighting mix(const Lighting& o, float w) const {
       return {w * diffuse + (1 - w) * o.diffuse, w * specular + (1 - w) * o.specular};

@@ -808,7 +808,7 @@ TEST(ShadingModel, LightingIsAveragedBeforeItIsApplied) {
     const Vec3f base(unit(rng), unit(rng), unit(rng));
     const ShadingModel::Lighting l0 = m.lighting(n0, view, light, false), l1 = m.lighting(n1, view, light, false);
     const Vec3f s0 = m.shade(base, n0, view, light, false), s1 = m.shade(base, n1, view, light, false);
-    const Vec3f mean = m.apply(base, l0.mean(l1));
+    const Vec3f mean = m.apply(base, l0.mix(l1, 0.5f));
     for (int c = 0; c < 3; ++c) {
       ASSERT_NEAR(mean[c], 0.5f * (s0[c] + s1[c]), 1e-6f) << trial;
       ASSERT_FLOAT_EQ(m.shade(base, n0, view, light, true)[c], base[c] * sh.ambient) << trial;
