@@ -1406,9 +1406,7 @@ class GigaVoxelsRenderer final : public Renderer {
       const bool own_v0 = prev_node == b.address;
       if (!(t0 < t1)) return false;
       if (own_v0 && v1) return search_halves(b, f, t0, t1, v0, *v1, r.search_halvings_, out);
-      if (!own_v0)
-        for (int a = 0; a < 3; ++a)
-          if (b.frame.dir[a] != 0) t0 = std::max(t0, ((b.frame.dir[a] > 0 ? 0.0 : 1.0) - b.frame.eye[a]) / b.frame.dir[a]);
+      if (!own_v0) t0 = std::max(t0, node_entry(b.frame));
       if (!(t0 < t1)) return false;
       if (!own_v0 && !v1) {  // between clear groups (or from another node into them): neither end known
         counters.samples += 2;
