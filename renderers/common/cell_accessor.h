@@ -179,11 +179,14 @@ class TrilinearSampler {
 
   V sample(const Vec3<V>& p) {
     int64_t cell[3];
-    V u[3];
-    locate(p, cell, u);
+    locate(p, cell, last_u_);
     load(cell);
-    return trilinear(c_, u[0], u[1], u[2]);
+    return trilinear(c_, last_u_[0], last_u_[1], last_u_[2]);
   }
+  /// @brief The exact trilinear gradient (voxel units) where the last sample(p) was taken,
+  /// from its cell's corners, still loaded: what sample(p, gradient) gives, without locating
+  /// p and interpolating the value again.
+  Vec3<V> last_sample_gradient() const { return trilinear_gradient(c_, last_u_[0], last_u_[1], last_u_[2]); }
   /// @brief Value and exact trilinear gradient (voxel units).
   V sample(const Vec3<V>& p, Vec3<V>& gradient) {
     int64_t cell[3];
@@ -249,6 +252,7 @@ class TrilinearSampler {
   int64_t last_cell_[3];
   int64_t cur_[3] = {-1, -1, -1};
   V c_[8] = {};
+  V last_u_[3] = {};  // where in its cell the last sample(p) was taken
 };
 
 }  // namespace brickyard

@@ -89,6 +89,14 @@ class RaymarchRenderer final : public Renderer {
       return sampler.sample(Vec3f(o + d * t));
     }
 
+    /// The gradient at q where sampler.sample(q) was the last sample taken: analytic from its
+    /// cell, still loaded.
+    Vec3d gradient_world_at_last_sample(const Vec3f& q) {
+      if (r.scene_.shading.normals != NormalMethod::analytic) return gradient_world(Vec3d(q));
+      ++counters.gradients;
+      return Vec3d(sampler.last_sample_gradient()) / r.geo_.spacing;
+    }
+
     Vec3d gradient_world(const Vec3d& q) {
       ++counters.gradients;
       const Vec3f p(q);
@@ -198,7 +206,7 @@ class RaymarchRenderer final : public Renderer {
         r.tf_table_.lookup(v, c, a);
         if (!(a > 0)) return true;
         Vec3d n(0.0);
-        if (gradients) n = facing_normal(gradient_world(Vec3d(q)), world_ray.dir);
+        if (gradients) n = facing_normal(gradient_world_at_last_sample(q), world_ray.dir);
         if (lit) {
           double light_distance;
           c = r.shading_.shade(c, n, -world_ray.dir, r.shading_.to_light(world_ray.at(t), setup.camera.eye, light_distance), false);

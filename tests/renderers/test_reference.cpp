@@ -22,6 +22,7 @@
 #include <random>
 #include <vector>
 
+#include "cache/brick_cache.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
 #include "renderers/common/cell_accessor.h"
@@ -311,6 +312,48 @@ TEST(Trilinear, WithGradientIsTrilinearAndItsGradientInFloatOnLargeValues) {
     }
   }
   std::cout << "[ measured ] trilinear_with_gradient: worst gradient error / cell spread " << worst << "\n";
+}
+
+TEST(TrilinearSampler, LastSampleGradientIsTheGradientOfSampleWithGradient) {
+  // raymarch's lit DVR takes a sample's gradient from the cell its value was just read from
+  // (last_sample_gradient): what sample(p, gradient) gives, across brick faces, at the volume's
+  // faces and outside it (clamped), in float and in double. Within a few ulps of the largest
+  // value (u16: 65535), not bit for bit: the compiler may contract the two call sites' products
+  // into FMAs differently (it did, in double); another cell or position would be far off.
+  testing::TempDir dir;
+  BuildOptions o;
+  o.brick_size = 8;
+  auto src = make_field_source(make_field("fbm"), {21, 18, 17}, ValueType::u16);
+  build_store(*src, dir.file("fbm"), o);
+  BrickStore store(dir.file("fbm"));
+  CacheConfig config;
+  config.l1_slots = 64;
+  config.l2_bytes = 64 * store.format().bytes();
+  BrickCache cache(store, config);
+  RayCounters counters;
+  const int finest = store.layout().finest();
+  TrilinearSampler<uint16_t, float> f(cache, counters, finest), f_with(cache, counters, finest);
+  TrilinearSampler<uint16_t, double> d(cache, counters, finest), d_with(cache, counters, finest);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> pos(-1.5, 22.0);
+  int varied = 0;
+  for (int n = 0; n < 4000; ++n) {
+    const Vec3d p(pos(rng), pos(rng) * 18 / 22, n % 7 == 0 ? 16.0 : pos(rng) * 17 / 22);
+    Vec3f gf;
+    const float vf = f_with.sample(Vec3f(p), gf);
+    ASSERT_EQ(f.sample(Vec3f(p)), vf);
+    const Vec3f lf = f.last_sample_gradient();
+    Vec3d gd;
+    d_with.sample(p, gd);
+    d.sample(p);
+    const Vec3d ld = d.last_sample_gradient();
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_NEAR(lf[a], gf[a], 8 * 0x1p-24 * 65535) << "float, sample " << n << " axis " << a;
+      ASSERT_NEAR(ld[a], gd[a], 8 * 0x1p-53 * 65535) << "double, sample " << n << " axis " << a;
+    }
+    varied += gf.x != 0 || gf.y != 0 || gf.z != 0;
+  }
+  EXPECT_GT(varied, 3000);  // not vacuous: the field varies
 }
 
 TEST(Cubic, FirstRootOfTrilinearCubicsIsTheFirstSignChange) {
