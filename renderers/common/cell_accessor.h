@@ -183,9 +183,12 @@ class TrilinearSampler {
     load(cell);
     return trilinear(c_, last_u_[0], last_u_[1], last_u_[2]);
   }
-  /// @brief The exact trilinear gradient (voxel units) where the last sample(p) was taken,
-  /// from its cell's corners, still loaded: what sample(p, gradient) gives, without locating
-  /// p and interpolating the value again.
+  /// @brief The exact trilinear gradient (voxel units) at the point of the last sample(p), from
+  /// its cell's corners: what sample(p, gradient) gives, for a caller that needs the gradient
+  /// only once the value has shown it is wanted (a DVR sample the transfer function makes
+  /// visible), without locating p and interpolating again (a tenth of raymarch's lit DVR
+  /// instructions). Valid only directly after sample(p): the other sampling calls load other
+  /// cells without recording where in them they sampled.
   Vec3<V> last_sample_gradient() const { return trilinear_gradient(c_, last_u_[0], last_u_[1], last_u_[2]); }
   /// @brief Value and exact trilinear gradient (voxel units).
   V sample(const Vec3<V>& p, Vec3<V>& gradient) {

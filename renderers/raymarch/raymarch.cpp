@@ -89,8 +89,8 @@ class RaymarchRenderer final : public Renderer {
       return sampler.sample(Vec3f(o + d * t));
     }
 
-    /// The gradient at q where sampler.sample(q) was the last sample taken: analytic from its
-    /// cell, still loaded.
+    /// The gradient at q, where sampler.sample(q) was the last sample taken: analytic ones from
+    /// that sample's cell (last_sample_gradient), the others by differences as ever.
     Vec3d gradient_world_at_last_sample(const Vec3f& q) {
       if (r.scene_.shading.normals != NormalMethod::analytic) return gradient_world(Vec3d(q));
       ++counters.gradients;
