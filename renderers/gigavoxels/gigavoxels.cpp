@@ -317,7 +317,6 @@ class GigaVoxelsRenderer final : public Renderer {
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
     const StoreLayout& layout = ctx.layout();
-    normals_ = scene_.shading.normals;
     if (p.source != 1)  // the amplified store's levels past the finest stored one halve its voxels
       for (int d = 0; d <= source_->max_depth(); ++d)
         level_dims_.push_back(d <= layout.finest() ? layout.level_dims(d) : layout.dims * (int64_t(1) << (d - layout.finest())));
@@ -750,12 +749,12 @@ class GigaVoxelsRenderer final : public Renderer {
       if (!gradient) return trilinear(c, u[0], u[1], u[2]);
       Vec3f g;
       float v;
-      if (r.normals_ == NormalMethod::analytic) {
+      if (r.scene_.shading.normals == NormalMethod::analytic) {
         v = trilinear_with_gradient(c, u[0], u[1], u[2], g);
       } else {
         v = trilinear(c, u[0], u[1], u[2]);
         const Vec3f within{float(cell[0]) + u[0], float(cell[1]) + u[1], float(cell[2]) + u[2]};
-        g = difference_gradient(b, within, v, r.normals_ == NormalMethod::central);
+        g = difference_gradient(b, within, v, r.scene_.shading.normals == NormalMethod::central);
       }
       *gradient = Vec3d(g) * (b.scale * double(r.m_));
       return v;
@@ -1286,7 +1285,7 @@ class GigaVoxelsRenderer final : public Renderer {
       const PathNode* prev_lattice = nullptr;
       // Difference normals are continuous across cell faces (they jump only at store-brick
       // faces, one in M, as the reference's do): their ends' mean serves.
-      const bool face_lighting = r.p_.face_lighting && gradients && r.shading_.lit() && r.normals_ == NormalMethod::analytic;
+      const bool face_lighting = r.p_.face_lighting && gradients && r.shading_.lit() && r.scene_.shading.normals == NormalMethod::analytic;
       // One more sample at the node's exit, so that the part-step to it is integrated even
       // when the next node takes no samples (hidden, or past the ray's end: on Marschner-Lobb
       // 64^3 at step 1, leaving that out doubled the error).
@@ -1599,7 +1598,6 @@ class GigaVoxelsRenderer final : public Renderer {
   std::vector<Scale> scales_;  // N^depth
   std::vector<double> inv_scales_;  // 1 / N^depth, rounded
   double unit_offset_ = 0.5;   // unit = (voxel + unit_offset) / extent
-  NormalMethod normals_ = NormalMethod::analytic;
   // A level's dims in voxels, per depth (difference normals stop at the volume's faces, as
   // the reference's do); empty for the sponge, whose nodes' bricks bound its differences.
   std::vector<Vec3s> level_dims_;
