@@ -836,13 +836,9 @@ class GigaVoxelsRenderer final : public Renderer {
       const int i = group_at(b, t, g);
       t_leave = cube_crossing(b, g, b.group_distances[i], true);
       if (b.group_distances[i] == 0) return false;
-      voxel = group_voxel(b, g);
-      return true;
-    }
-    /// A voxel of brick b's cell group g (its first), which stands for a clear group's values.
-    float group_voxel(const PathNode& b, const int g[3]) const {
       const size_t e = size_t(r.m_) + 2;
-      return float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
+      voxel = float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
+      return true;
     }
 
     /// The cell group of brick b at t: its index, and its coordinates in g.
@@ -1289,8 +1285,10 @@ class GigaVoxelsRenderer final : public Renderer {
       const PathNode& fine = *lv.b[lv.count - 1];
       const double fine_voxel = 1.0 / (double(r.m_) * fine.scale);
       const double finest_dt = r.step_ * fine_voxel / unit_per_t;
-      double t = t_io, visible_until = -kInf;  // the cell group of the last look showed something before
-      int visible_group = -1;  // kOneLevel: the index of that group
+      // The cell group of the last look showed something: before visible_until (!kOneLevel), or
+      // while the sample's group index is visible_group (kOneLevel).
+      double t = t_io, visible_until = -kInf;
+      int visible_group = -1;
       RayState s = ray_state;  // a copy the compiler keeps in registers
       bool finished = false;
       // Where the previous sample fell among the cells of its brick (prev_lattice), when it
@@ -1328,13 +1326,13 @@ class GigaVoxelsRenderer final : public Renderer {
         double t_next = 0, t_leave = kInf;
         bool leap = false;
         // At one level, t's brick coordinates serve both the look and the sample; and the look
-        // is skipped while the ray stays in the group the last look found visible, by its index
-        // (a third of the instructions of finding where the ray leaves the group).
+        // is skipped while the ray stays in the group the last look found visible, which its
+        // index tells more cheaply than where the ray leaves that group.
         double l[3];
         if constexpr (kOneLevel) {
           brick_coordinates(fine, t, l);
-          int g[3];
           if (skip_cells) {
+            int g[3];
             if (const int i = group_of(l, g); i != visible_group) {
               const uint8_t distance = fine.group_distances[i];
               if (distance == 0) visible_group = i;

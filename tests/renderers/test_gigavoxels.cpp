@@ -616,7 +616,9 @@ TEST_F(GigaVoxels, LeapingClearCellGroupsKeepsTheImageAndSavesSamples) {
   // (iso: bit for bit here; DVR: up to the pre-integration table's slight opacity next to a
   // zero-opacity range, which the leap does not add), with fewer samples. Marschner-Lobb at
   // 64^3 has ripples in nearly every group; a sphere's distance leaves most groups clear. The
-  // adaptive step grows with the opacity gathered, which a clear group does not change.
+  // adaptive step grows with the opacity gathered, which a clear group does not change. At
+  // lod_ratio 0.25 the footprint stays finer than the finest level, so DVR takes march_dvr's
+  // one-level path, which looks a group up only when the sample's group index changes.
   for (const char* store : {"ml.store", "sphere.store"})
     for (const std::string& mode : {iso_scene(), dvr_scene()}) {
       const bool iso = mode == iso_scene();
@@ -637,7 +639,11 @@ TEST_F(GigaVoxels, LeapingClearCellGroupsKeepsTheImageAndSavesSamples) {
       if (iso) {
         EXPECT_LT(e.depth_max, 1e-6) << what << ": " << e.to_json();
       }
-      EXPECT_LT(double(samples[1]), (store == std::string("sphere.store") && iso ? 0.6 : 1.0) * double(samples[0]))
+      // Measured: iso 0.91 (ML) and 0.46 (sphere), DVR 0.81 and 0.93. A look skipped where a
+      // group should be looked up leaps less, and takes more samples.
+      const bool sphere = store == std::string("sphere.store");
+      const double most = iso ? (sphere ? 0.6 : 1.0) : (sphere ? 0.96 : 0.85);
+      EXPECT_LT(double(samples[1]), most * double(samples[0]))
           << what << ": " << samples[1] << " samples with leaps, " << samples[0] << " without";
     }
 }
