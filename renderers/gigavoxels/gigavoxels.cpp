@@ -741,14 +741,15 @@ class GigaVoxelsRenderer final : public Renderer {
     float sample_brick(const PathNode& b, double t, Vec3d* gradient, CellPoint* at = nullptr) const {
       double l[3];
       brick_coordinates(b, t, l);
-      return sample_brick_at(b, Vec3f(float(l[0]), float(l[1]), float(l[2])), gradient, at);
+      return sample_brick_at(b, l, gradient, at);
     }
     /// Where t lies in brick b, in brick coordinates (voxel i + 1 at i: the border voxel at 0).
     void brick_coordinates(const PathNode& b, double t, double l[3]) const {
       for (int a = 0; a < 3; ++a) l[a] = (b.frame.eye[a] + b.frame.dir[a] * t) * double(r.m_) + 0.5;
     }
-    /// sample_brick at brick coordinates l.
-    float sample_brick_at(const PathNode& b, const Vec3f& l, Vec3d* gradient, CellPoint* at) const {
+    /// sample_brick at brick coordinates l (brick_coordinates), read in float.
+    float sample_brick_at(const PathNode& b, const double l_at[3], Vec3d* gradient, CellPoint* at) const {
+      const Vec3f l{float(l_at[0]), float(l_at[1]), float(l_at[2])};
       int64_t cell[3];
       float u[3], c[8];
       brick_cell(b, l, cell, u, c);
@@ -1357,7 +1358,7 @@ class GigaVoxelsRenderer final : public Renderer {
           CellPoint at;
           const bool one_lattice = face_lighting && !bl.coarse;
           float v;
-          if constexpr (kOneLevel) v = sample_brick_at(fine, Vec3f(float(l[0]), float(l[1]), float(l[2])), gradients ? &g : nullptr, one_lattice ? &at : nullptr);
+          if constexpr (kOneLevel) v = sample_brick_at(fine, l, gradients ? &g : nullptr, one_lattice ? &at : nullptr);
           else v = sample(bl, t, gradients ? &g : nullptr, one_lattice ? &at : nullptr);
           bool lit_here = false;
           if (s.have_prev) {
