@@ -188,6 +188,7 @@ struct BenchOptions {
   std::string scene, out = "out/bench", backends = "all", frame = "0";
   std::vector<std::string> quality;
   int warm = 5, cold = 3;
+  int reference_supersample = 1;
   std::string size;
 };
 
@@ -249,6 +250,14 @@ void run_bench(const BenchOptions& o) {
     scene.height = scene.camera.height = int(wh[1]);
   }
   const int frame = parse_frames(o.frame, scene.frames()).front();
+  const int supersample = o.reference_supersample;
+  if (supersample < 1 || supersample % 2 == 0 || int64_t(scene.width) * supersample > 16384 ||
+      int64_t(scene.height) * supersample > 16384)
+    throw Error(Errc::invalid_argument,
+                fmt::format("{} is not an odd factor from 1 whose image ({}x{} times it) stays within 16384 pixels a side "
+                            "(odd: the middle sub-pixel is the pixel's centre, which gives depth and normals)",
+                            supersample, scene.width, scene.height))
+        .with_field("--reference-supersample");
   // --quality NAME=V1,V2,...: the values to sweep for back ends that have the parameter NAME.
   std::map<std::string, std::vector<double>> sweeps;
   for (const std::string& q : o.quality) {
@@ -286,17 +295,26 @@ void run_bench(const BenchOptions& o) {
   BenchReport report;
   report.title = fmt::format("{}: {} mode, {}x{}, frame {}, {}", fs::path(o.scene).filename().string(),
                              to_string(scene.mode), scene.width, scene.height, frame, scene.dataset);
+  if (supersample > 1)
+    report.title += fmt::format(", reference supersampled {0}x{0} (colour box-filtered, depth and normals at pixel centres)",
+                                supersample);
 
   std::cout << fmt::format("bench {} ({}x{}, {} mode) -> {}\n", o.scene, scene.width, scene.height, to_string(scene.mode), o.out);
-  // The truth: the reference renderer, once cold and once warm.
+  // The truth: the reference renderer, once cold and once warm; supersampled, at `supersample`
+  // times the size and box-filtered down (its times are those of the larger image).
   FrameBuffers truth;
   double voxel_size = 1;
   {
     RenderSession::Options ro;
     ro.backend = "reference";
-    RenderSession ref(scene, ro);
+    Scene fine = scene;
+    fine.width = fine.camera.width = scene.width * supersample;
+    fine.height = fine.camera.height = scene.height * supersample;
+    RenderSession ref(fine, ro);
     voxel_size = ref.context().geometry().voxel_size;
-    BenchRow row = measure(ref, frame, 1, 1, outputs, truth);
+    FrameBuffers fine_truth;
+    BenchRow row = measure(ref, frame, 1, 1, outputs, fine_truth);
+    truth = supersample > 1 ? box_filter(fine_truth, supersample) : std::move(fine_truth);
     row.backend = "reference";
     row.is_reference = true;
     row.error = compare_frames(truth, truth, voxel_size);
@@ -396,6 +414,9 @@ void add_render_commands(CLI::App& app) {
     cmd->add_option("--frame", o->frame, "Frame of the scene's camera path to render (default 0)");
     cmd->add_option("--size", o->size, "Image size W,H instead of the scene's");
     cmd->add_option("--dataset", o->dataset, "Store to render instead of the scene's dataset");
+    cmd->add_option("--reference-supersample", o->reference_supersample,
+                    "Render the reference at N times the width and height (N odd) and box-filter it down: error against "
+                    "each pixel's mean over its area rather than its centre ray, the truth for back ends that filter");
     cmd->add_option("--out", o->out, "Report directory (bench.md, bench.csv, equal-error.csv, error-vs-time.png, contact-sheet.png, images/)");
     cmd->callback([o] { run_bench(*o); });
   }

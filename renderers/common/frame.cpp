@@ -5,6 +5,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/error.h"
+
 namespace brickyard {
 
 RayCounters& RayCounters::operator+=(const RayCounters& o) {
@@ -40,6 +42,31 @@ void FrameStats::add_phase(const std::string& name, double s) {
       return;
     }
   phases.push_back({name, s});
+}
+
+FrameBuffers box_filter(const FrameBuffers& fine, int factor) {
+  BY_CHECK(factor >= 1 && factor % 2 == 1);
+  BY_CHECK(fine.width() % factor == 0 && fine.height() % factor == 0);
+  const int w = fine.width() / factor, h = fine.height() / factor, middle = factor / 2;
+  FrameOutputs outputs;
+  outputs.depth = !fine.depth.empty();
+  outputs.normals = !fine.normal.empty();
+  FrameBuffers out(w, h, outputs);
+  const double weight = 1.0 / double(factor * factor);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      double sum[4] = {0, 0, 0, 0};
+      for (int j = 0; j < factor; ++j)
+        for (int i = 0; i < factor; ++i) {
+          const Rgbaf& c = fine.color(factor * x + i, factor * y + j);
+          sum[0] += c.r, sum[1] += c.g, sum[2] += c.b, sum[3] += c.a;
+        }
+      out.color(x, y) = {float(sum[0] * weight), float(sum[1] * weight), float(sum[2] * weight), float(sum[3] * weight)};
+      const int cx = factor * x + middle, cy = factor * y + middle;
+      if (outputs.depth) out.depth(x, y) = fine.depth(cx, cy);
+      if (outputs.normals) out.normal(x, y) = fine.normal(cx, cy);
+    }
+  return out;
 }
 
 std::string FrameStats::to_json() const {

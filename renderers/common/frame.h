@@ -91,6 +91,15 @@ struct FrameStats {
   std::string to_json() const;
 };
 
+/// @brief A frame rendered at `factor` times its width and height, brought to its own size:
+/// a pixel's colour and alpha are the mean of its factor x factor sub-pixels (a box filter),
+/// its depth and normal those of the middle sub-pixel, whose ray is the pixel's centre ray.
+/// `factor` is odd so that such a sub-pixel exists; a depth or normal averaged across a
+/// silhouette would be neither surface's. The image a pixel should show is the mean over
+/// its area, which renderers that filter by their footprint (mipmaps) approximate and a
+/// single centre ray aliases.
+FrameBuffers box_filter(const FrameBuffers& fine, int factor);
+
 /// @brief Colour as 8-bit RGBA (opaque), rounding to nearest: for PNG output.
 ImageRGBA8 to_rgba8(const Image<Rgbaf>& color);
 /// @brief Depth as grey (near bright, far dark, misses black), scaled over the finite range.

@@ -32,3 +32,38 @@ TEST(FrameStats, PhasesAccumulateByName) {
   EXPECT_DOUBLE_EQ(s.phase("missing"), 0.0);
   EXPECT_NE(s.to_json().find("\"prepare\""), std::string::npos);
 }
+
+TEST(FrameBuffers, BoxFilterAveragesColourAndKeepsTheCentreRaysDepthAndNormal) {
+  // 2x1 pixels at factor 3: every sub-pixel's colour encodes its position, so the mean is
+  // known; the middle sub-pixel (1, 1) of each block alone carries a finite depth and a normal.
+  FrameBuffers fine(6, 3, FrameOutputs{.depth = true, .normals = true});
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 6; ++x) {
+      fine.color(x, y) = {float(x), float(y), x < 3 ? 1.0f : 0.0f, (x + y) % 2 ? 1.0f : 0.0f};
+      fine.normal(x, y) = {0, 0, 0};
+    }
+  fine.depth(1, 1) = 2.5f, fine.normal(1, 1) = {0, 1, 0};
+  fine.depth(4, 1) = 7.0f, fine.normal(4, 1) = {1, 0, 0};
+  fine.depth(3, 0) = 9.0f;  // not a centre: never seen
+  const FrameBuffers coarse = box_filter(fine, 3);
+  ASSERT_EQ(coarse.width(), 2);
+  ASSERT_EQ(coarse.height(), 1);
+  EXPECT_FLOAT_EQ(coarse.color(0, 0).r, 1.0f);  // mean of x = 0, 1, 2
+  EXPECT_FLOAT_EQ(coarse.color(1, 0).r, 4.0f);
+  EXPECT_FLOAT_EQ(coarse.color(0, 0).g, 1.0f);
+  EXPECT_FLOAT_EQ(coarse.color(0, 0).b, 1.0f);
+  EXPECT_FLOAT_EQ(coarse.color(1, 0).b, 0.0f);
+  EXPECT_FLOAT_EQ(coarse.color(0, 0).a, 4.0f / 9.0f);  // a checkerboard's odd cells in a 3x3 block
+  EXPECT_FLOAT_EQ(coarse.color(1, 0).a, 5.0f / 9.0f);
+  EXPECT_FLOAT_EQ(coarse.depth(0, 0), 2.5f);
+  EXPECT_FLOAT_EQ(coarse.depth(1, 0), 7.0f);
+  EXPECT_EQ(coarse.normal(0, 0), (Vec3f{0, 1, 0}));
+  EXPECT_EQ(coarse.normal(1, 0), (Vec3f{1, 0, 0}));
+  // Factor 1 is the identity; buffers the fine frame lacks stay absent.
+  FrameBuffers colour_only(4, 2, FrameOutputs{.depth = false, .normals = false});
+  colour_only.color(3, 1) = {0.25f, 0.5f, 0.75f, 1};
+  const FrameBuffers same = box_filter(colour_only, 1);
+  EXPECT_EQ(same.color, colour_only.color);
+  EXPECT_TRUE(same.depth.empty());
+  EXPECT_TRUE(same.normal.empty());
+}
