@@ -123,7 +123,10 @@ void run_render(const RenderOptions& o) {
     // A still camera shows the converged image (asynchronous back ends refine over frames as
     // their data arrives); a camera path is flown frame by frame unless --settle.
     int settle_frames = 0;
-    if (!scene.has_path || o.settle) settle_frames = session.settle(f, outputs);
+    // A still camera's frames before the converged one are not shown (complete them at once);
+    // --settle on a path counts the frames a viewer would see converge.
+    if (!scene.has_path) settle_frames = session.settle(f, outputs, 500, RenderSession::Settle::complete);
+    else if (o.settle) settle_frames = session.settle(f, outputs);
     const FrameStats stats = session.render(f, fb, outputs);
     write_png(frame_path(o.out, f, several), to_rgba8(fb.color));
     if (!o.depth.empty()) write_png(frame_path(o.depth, f, several), depth_to_rgba8(fb.depth));
@@ -162,7 +165,9 @@ void run_render(const RenderOptions& o) {
     const double n = double(all.size());
     std::cout << fmt::format("{} frames: median {}, p95 {}, {} read per frame", all.size(), format_duration(median_of(seconds)),
                              format_duration(p95_of(seconds)), format_bytes(bytes / n));
-    if (settle > 0) std::cout << fmt::format(", {:.1f} frames to converge per frame", settle / n);
+    if (settle > 0)
+      std::cout << fmt::format(", {:.1f} frames {} per frame", settle / n,
+                               scene.has_path ? "to converge" : "to settle (each completed at once where the back end can)");
     std::cout << "\n";
     if (!sums.empty()) {
       std::string line;
@@ -211,7 +216,7 @@ BenchRow measure(RenderSession& session, int frame, int cold, int warm, const Fr
   }
   // Warm: the cache filled and the back end converged (asynchronous back ends refine over
   // frames as their data arrives).
-  row.settle_frames = session.settle(frame, outputs);
+  row.settle_frames = session.settle(frame, outputs, 500, RenderSession::Settle::complete);
   for (int i = 0; i < warm; ++i) {
     stats = session.render(frame, last, outputs);
     warm_s.push_back(stats.seconds);

@@ -164,7 +164,12 @@ void RenderSession::reset_cache() { build(); }
 
 bool RenderSession::converged() const { return renderer_->converged(); }
 
-int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames) {
+int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames, Settle how) {
+  struct CompleteFrames {  // off again however settle() ends
+    Renderer& renderer;
+    explicit CompleteFrames(Renderer& r, bool on) : renderer(r) { renderer.set_complete_frames(on); }
+    ~CompleteFrames() { renderer.set_complete_frames(false); }
+  } complete(*renderer_, how == Settle::complete);
   FrameBuffers scratch;
   for (int n = 1; n <= max_frames; ++n) {
     render(frame, scratch, outputs);

@@ -48,9 +48,14 @@ class RenderSession {
   void reset_cache();
   /// @brief Whether the back end's last frame was complete (see Renderer::converged()).
   bool converged() const;
+  /// @brief How settle() renders the frames before the converged one.
+  enum class Settle {
+    refine,    ///< as they would be shown: the frames taken are the frames to converge
+    complete,  ///< none is shown: each may be completed at once (Renderer::set_complete_frames)
+  };
   /// @brief Renders frame `frame` repeatedly, letting the loader serve each frame's requests,
   /// until the back end converges (at most max_frames); returns the frames it took.
-  int settle(int frame, const FrameOutputs& outputs, int max_frames = 500);
+  int settle(int frame, const FrameOutputs& outputs, int max_frames = 500, Settle how = Settle::refine);
 
  private:
   void build();

@@ -165,6 +165,11 @@ class Renderer {
   /// an asynchronous back end is still refining or waiting for data (the image converges over
   /// frames). Benchmarks settle back ends before timing warm frames.
   virtual bool converged() const { return true; }
+  /// @brief On while the caller renders frames it will not show, only the converged one
+  /// after them (a still image, a benchmark's warm-up): a back end that refines over frames
+  /// as its data arrives may complete each frame instead, waiting for its data. Off for
+  /// frames that are shown, and where the frames to converge are what is measured.
+  virtual void set_complete_frames(bool complete) { (void)complete; }
 };
 
 using BackendFactory = std::function<std::unique_ptr<Renderer>(const RenderContext&, const BackendParams&)>;

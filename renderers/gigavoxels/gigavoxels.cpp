@@ -359,7 +359,7 @@ class GigaVoxelsRenderer final : public Renderer {
       uses_ = std::make_unique<gigavoxels::UseBuffer>(setup.width, setup.height, p_.slots_per_pixel);
     uses_->begin_frame(frame_);
     states_.assign(size_t(setup.width) * size_t(setup.height), RayState{});
-    allow_interrupt_ = p_.exact;
+    allow_interrupt_ = exact();
     const double pixel_angle = 2 * std::tan(setup.camera.fov_degrees * kPi / 360.0) / double(setup.height);
     footprint_per_t_ = pixel_angle / geo_.voxel_size / extent_ * lod_ratio_;
   }
@@ -383,7 +383,7 @@ class GigaVoxelsRenderer final : public Renderer {
   }
 
   bool another_pass() override {
-    if (!p_.exact) return false;
+    if (!exact()) return false;
     interrupted_ = 0;
     for (const RayState& s : states_) interrupted_ += s.status == RayState::interrupted;
     if (interrupted_ == 0) return false;
@@ -419,8 +419,13 @@ class GigaVoxelsRenderer final : public Renderer {
   /// Approximate mode: the last frame's rays needed nothing (or nothing could be served for 3
   /// frames); exact mode: the last pass needed nothing, or could not be served.
   bool converged() const override {
-    return p_.exact ? last_pass_requests_ == 0 || last_pass_progress_ == 0 : frame_requests_ == 0 || stalled_frames_ >= 3;
+    return exact() ? last_pass_requests_ == 0 || last_pass_progress_ == 0 : frame_requests_ == 0 || stalled_frames_ >= 3;
   }
+
+  /// Frames nobody sees are rendered in exact mode: approximate frames are each drawn whole
+  /// while at most upload_budget more bricks arrive, so a cold start over a large store draws
+  /// tens of them where exact passes redraw only the rays that stopped.
+  void set_complete_frames(bool complete) override { complete_frames_ = complete; }
 
   const NodeTree& tree() const { return tree_; }
   const Voxel* brick(uint32_t slot) const { return pool_.data() + size_t(slot) * tree_.brick_values(); }
@@ -1650,6 +1655,8 @@ class GigaVoxelsRenderer final : public Renderer {
   std::unique_ptr<gigavoxels::UseBuffer> uses_;
   mutable std::vector<RayState> states_;
   bool allow_interrupt_ = false;
+  bool complete_frames_ = false;  // set_complete_frames()
+  bool exact() const { return p_.exact || complete_frames_; }
   gigavoxels::Compactor compactor_;
   std::vector<uint32_t> used_list_, request_list_;
   /// A brick the loader asked the store for, copied into the pool when it arrives whether or

@@ -807,6 +807,31 @@ TEST_F(GigaVoxels, ApproximateModeConvergesToExactModeAfterACameraJump) {
   EXPECT_LE(frames, 12) << "frames to converge after the jump";
 }
 
+TEST_F(GigaVoxels, SettlingWithCompleteFramesTakesExactPassesAndShowsTheSameImage) {
+  // A still image's warm-up frames are not shown: completed at once (exact passes), they
+  // converge in one frame where approximate ones take several, to the same image; the frames
+  // shown afterwards are approximate again (a jump's first frame is one pass, unconverged).
+  const std::string path = R"("camera_path": {"frames": 2, "fov_degrees": 35, "keyframes": [
+      {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45]}, {"eye": [-0.9, 1.9, -0.4], "target": [0.5, 0.5, 0.5]}]})";
+  const Scene sc = scene(iso_scene() + R"(, "quality": {"lod_ratio": 0.5})", 64, path);
+  RenderSession refined(sc, backend_options("gigavoxels"));
+  const int refine_frames = refined.settle(0, kAll);
+  RenderSession completed(sc, backend_options("gigavoxels"));
+  const int complete_frames = completed.settle(0, kAll, 500, RenderSession::Settle::complete);
+  EXPECT_GE(refine_frames, 3);
+  EXPECT_LE(complete_frames, 2);
+  FrameBuffers a, b;
+  refined.render(0, a, kAll);
+  const FrameStats still = completed.render(0, b, kAll);
+  EXPECT_EQ(still.backend_value("passes"), 1);
+  EXPECT_TRUE(completed.converged());
+  EXPECT_EQ(a.color, b.color);
+  const FrameStats jump = completed.render(1, b, kAll);
+  EXPECT_EQ(jump.backend_value("passes"), 1);
+  EXPECT_GT(jump.backend_value("feedback_requests"), 0);
+  EXPECT_FALSE(completed.converged());
+}
+
 TEST_F(GigaVoxels, BrickPoolAndCacheShareTheL1BudgetAndStillConverge) {
   // The cache's L1 keeps only the slots the loader stages its copies through (2 x upload_budget);
   // the brick pool takes the rest of the budget, not a second budget of its own. The loader asks
