@@ -26,7 +26,7 @@ struct BenchRow {
   int width = 0, height = 0, threads = 0;
   double cold_median_s = 0, cold_p95_s = 0, warm_median_s = 0, warm_p95_s = 0;
   int cold_runs = 0, warm_runs = 0;
-  int settle_frames = 0;        ///< frames the back end took to converge before the warm frames (1: at once)
+  int settle_frames = 0;        ///< warm-up frames before the warm ones, completed at once where the back end can (RenderSession::Settle::complete)
   ImageError error;             ///< against the reference frame
   bool is_reference = false;    ///< the truth itself: error 0 by definition
   double rays_per_second_per_core = 0;

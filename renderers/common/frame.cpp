@@ -44,7 +44,7 @@ void FrameStats::add_phase(const std::string& name, double s) {
   phases.push_back({name, s});
 }
 
-FrameBuffers box_filter(const FrameBuffers& fine, int factor) {
+FrameBuffers resolve_supersampled(const FrameBuffers& fine, int factor) {
   BY_CHECK(factor >= 1 && factor % 2 == 1);
   BY_CHECK(fine.width() % factor == 0 && fine.height() % factor == 0);
   const int w = fine.width() / factor, h = fine.height() / factor, middle = factor / 2;

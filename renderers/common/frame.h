@@ -98,7 +98,7 @@ struct FrameStats {
 /// silhouette would be neither surface's. The image a pixel should show is the mean over
 /// its area, which renderers that filter by their footprint (mipmaps) approximate and a
 /// single centre ray aliases.
-FrameBuffers box_filter(const FrameBuffers& fine, int factor);
+FrameBuffers resolve_supersampled(const FrameBuffers& fine, int factor);
 
 /// @brief Colour as 8-bit RGBA (opaque), rounding to nearest: for PNG output.
 ImageRGBA8 to_rgba8(const Image<Rgbaf>& color);

@@ -171,10 +171,16 @@ int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames
     ~CompleteFrames() { renderer.set_complete_frames(false); }
   } complete(*renderer_, how == Settle::complete);
   FrameBuffers scratch;
+  bool completing = how == Settle::complete;
   for (int n = 1; n <= max_frames; ++n) {
     render(frame, scratch, outputs);
     cache_->wait_idle();  // the loader serves this frame's requests before the next one
-    if (renderer_->converged()) return n;
+    if (!renderer_->converged()) continue;
+    if (!completing) return n;
+    // A complete frame also converges when a pass could not be served (passes exhausted, a
+    // pool too small); the frames shown next are not completed: settle until they converge too.
+    completing = false;
+    renderer_->set_complete_frames(false);
   }
   return max_frames;
 }

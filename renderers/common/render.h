@@ -54,7 +54,10 @@ class RenderSession {
     complete,  ///< none is shown: each may be completed at once (Renderer::set_complete_frames)
   };
   /// @brief Renders frame `frame` repeatedly, letting the loader serve each frame's requests,
-  /// until the back end converges (at most max_frames); returns the frames it took.
+  /// until the back end converges (at most max_frames); returns the frames it took. With
+  /// Settle::complete, frames are completed at once until one converges, then rendered as
+  /// they would be shown until one of those converges too (usually the next): the count is
+  /// then not the frames a viewer would see converge.
   int settle(int frame, const FrameOutputs& outputs, int max_frames = 500, Settle how = Settle::refine);
 
  private:

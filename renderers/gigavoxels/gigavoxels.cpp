@@ -359,7 +359,8 @@ class GigaVoxelsRenderer final : public Renderer {
       uses_ = std::make_unique<gigavoxels::UseBuffer>(setup.width, setup.height, p_.slots_per_pixel);
     uses_->begin_frame(frame_);
     states_.assign(size_t(setup.width) * size_t(setup.height), RayState{});
-    allow_interrupt_ = exact();
+    frame_exact_ = exact();
+    allow_interrupt_ = frame_exact_;
     const double pixel_angle = 2 * std::tan(setup.camera.fov_degrees * kPi / 360.0) / double(setup.height);
     footprint_per_t_ = pixel_angle / geo_.voxel_size / extent_ * lod_ratio_;
   }
@@ -383,7 +384,7 @@ class GigaVoxelsRenderer final : public Renderer {
   }
 
   bool another_pass() override {
-    if (!exact()) return false;
+    if (!frame_exact_) return false;
     interrupted_ = 0;
     for (const RayState& s : states_) interrupted_ += s.status == RayState::interrupted;
     if (interrupted_ == 0) return false;
@@ -416,10 +417,11 @@ class GigaVoxelsRenderer final : public Renderer {
                      {"loader_ms", loader_seconds_ * 1e3}};
   }
 
-  /// Approximate mode: the last frame's rays needed nothing (or nothing could be served for 3
-  /// frames); exact mode: the last pass needed nothing, or could not be served.
+  /// An approximate frame: its rays needed nothing (or nothing could be served for 3 frames);
+  /// an exact one (exact=1, or complete frames): its last pass needed nothing, or could not be
+  /// served. Judged by the mode the last frame was rendered in, whatever was asked since.
   bool converged() const override {
-    return exact() ? last_pass_requests_ == 0 || last_pass_progress_ == 0 : frame_requests_ == 0 || stalled_frames_ >= 3;
+    return frame_exact_ ? last_pass_requests_ == 0 || last_pass_progress_ == 0 : frame_requests_ == 0 || stalled_frames_ >= 3;
   }
 
   /// Frames nobody sees are rendered in exact mode: approximate frames are each drawn whole
@@ -1656,6 +1658,7 @@ class GigaVoxelsRenderer final : public Renderer {
   mutable std::vector<RayState> states_;
   bool allow_interrupt_ = false;
   bool complete_frames_ = false;  // set_complete_frames()
+  bool frame_exact_ = false;      // the frame under way (or the last one) takes exact passes
   bool exact() const { return p_.exact || complete_frames_; }
   gigavoxels::Compactor compactor_;
   std::vector<uint32_t> used_list_, request_list_;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <map>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -225,8 +226,8 @@ TEST_F(CliRender, BenchWritesTableReportImagesAndCharts) {
 TEST_F(CliRender, BenchAgainstASupersampledReferenceFiltersColourAndKeepsCentreDepths) {
   testing::TempDir out;
   const std::string scene = write_scene("bench_ss.json", R"("image": {"width": 24, "height": 24}, )" + kCamera + ", " + kIso);
-  // Column i of the raymarch row (the CSV's third line) and of the reference's (second).
-  const auto bench = [&](int factor, std::vector<std::string>& reference, std::vector<std::string>& row) {
+  using Row = std::map<std::string, std::string>;  // a CSV row by its header's names
+  const auto bench = [&](int factor, Row& reference, Row& row) {
     const std::string report = out.file("ss" + std::to_string(factor));
     const auto r = brickyard("-q bench " + scene + " --backends raymarch --warm 1 --cold 0 --quality step=0.5 " +
                              "--reference-supersample " + std::to_string(factor) + " --out " + report);
@@ -239,32 +240,59 @@ TEST_F(CliRender, BenchAgainstASupersampledReferenceFiltersColourAndKeepsCentreD
       for (std::string c; std::getline(in, c, ',');) f.push_back(c);
       return f;
     };
-    reference = split(csv[1]), row = split(csv[2]);
-    ASSERT_GT(row.size(), 22u);
+    const std::vector<std::string> header = split(csv[0]);
+    for (const auto& [line, into] : {std::pair{csv[1], &reference}, std::pair{csv[2], &row}}) {
+      const std::vector<std::string> fields = split(line);
+      ASSERT_EQ(fields.size(), header.size()) << line;
+      for (size_t i = 0; i < header.size(); ++i) (*into)[header[i]] = fields[i];
+    }
     if (factor > 1) {
       EXPECT_THAT(testing::read_file(report + "/bench.md"), HasSubstr("reference supersampled 3x3"));
+      EXPECT_EQ(reference["quality"], "supersample=3");
     }
   };
-  std::vector<std::string> ref1, row1, ref3, row3;
-  bench(1, ref1, row1);
-  bench(3, ref3, row3);
-  const int width = 3, rmse = 19, depth_mean = 22;
-  EXPECT_EQ(ref1[width], "24");
-  EXPECT_EQ(ref3[width], "72");  // the reference renders 3x3 rays a pixel
-  EXPECT_EQ(row3[width], "24");
+  Row ref1, row1, ref3, row3;
+  ASSERT_NO_FATAL_FAILURE(bench(1, ref1, row1));
+  ASSERT_NO_FATAL_FAILURE(bench(3, ref3, row3));
+  EXPECT_EQ(ref1["width"], "24");
+  EXPECT_EQ(ref3["width"], "72");  // the reference renders 3x3 rays a pixel
+  EXPECT_EQ(row3["width"], "24");
   // raymarch's surface matches the centre rays' to rounding (about 2e-8), but the sphere's
   // silhouette pixels are part covered: their mean differs from their centre ray (measured
   // 0.0107). Depth comes from the centre rays in both: the same depth error.
-  EXPECT_LT(std::stod(row1[rmse]), 1e-4) << row1[rmse];
-  EXPECT_GT(std::stod(row3[rmse]), 3e-3) << row3[rmse];
-  EXPECT_EQ(row3[depth_mean], row1[depth_mean]);
+  EXPECT_LT(std::stod(row1["rmse"]), 1e-4) << row1["rmse"];
+  EXPECT_GT(std::stod(row3["rmse"]), 3e-3) << row3["rmse"];
+  EXPECT_EQ(row3["depth_mean"], row1["depth_mean"]);
 
-  // An even factor has no centre sub-pixel: refused before anything is written.
-  const auto even = brickyard("-q bench " + scene + " --warm 1 --cold 0 --reference-supersample 2 --out " + out.file("even"));
-  EXPECT_EQ(even.exit_code, 2) << even.output;
-  EXPECT_THAT(even.output, HasSubstr("--reference-supersample"));
-  EXPECT_THAT(even.output, HasSubstr("odd"));
-  EXPECT_FALSE(fs::exists(out.file("even")));
+  // An even factor has no centre sub-pixel, and a reference over 16384 pixels a side is
+  // refused: both by name, before anything is written.
+  for (const auto& [factor, why] : {std::pair{"2", "must be odd"}, std::pair{"683", "exceeds 16384 pixels a side"}}) {
+    const std::string dir = out.file(std::string("bad") + factor);
+    const auto bad = brickyard("-q bench " + scene + " --warm 1 --cold 0 --reference-supersample " + factor + " --out " + dir);
+    EXPECT_EQ(bad.exit_code, 2) << bad.output;
+    EXPECT_THAT(bad.output, HasSubstr("--reference-supersample"));
+    EXPECT_THAT(bad.output, HasSubstr(why));
+    EXPECT_FALSE(fs::exists(dir));
+  }
+}
+
+TEST_F(CliRender, AStillOfAnAsynchronousBackEndIsTheConvergedImageWithoutShowingTheFramesBefore) {
+  // gigavoxels refines over frames as bricks arrive (4 a frame of the 9 here: 7 frames to
+  // converge, measured on a one-frame path with --settle): a still's warm-up frames are
+  // completed at once, one exact frame and one to check, and the image is exact mode's.
+  testing::TempDir out;
+  const std::string scene = write_scene("still_gv.json", R"("image": {"width": 48, "height": 48}, )" + kCamera + ", " + kIso);
+  const std::string stats = out.file("still.json");
+  const auto still = brickyard("-q render " + scene + " --backend gigavoxels --set upload_budget=4 --set lod_ratio=0.25 -o " +
+                               out.file("still.png") + " --stats " + stats);
+  ASSERT_EQ(still.exit_code, 0) << still.output;
+  const nlohmann::json j = nlohmann::json::parse(testing::read_file(stats));
+  const nlohmann::json& frame = j.is_array() ? j[0] : j["frames"][0];
+  EXPECT_EQ(frame["settle_frames"].get<int>(), 2) << frame.dump();
+  const auto exact = brickyard("-q render " + scene + " --backend gigavoxels --set exact=1 --set lod_ratio=0.25 -o " +
+                               out.file("exact.png"));
+  ASSERT_EQ(exact.exit_code, 0) << exact.output;
+  EXPECT_EQ(read_png(out.file("still.png")), read_png(out.file("exact.png")));
 }
 
 }  // namespace

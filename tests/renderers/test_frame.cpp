@@ -33,7 +33,7 @@ TEST(FrameStats, PhasesAccumulateByName) {
   EXPECT_NE(s.to_json().find("\"prepare\""), std::string::npos);
 }
 
-TEST(FrameBuffers, BoxFilterAveragesColourAndKeepsTheCentreRaysDepthAndNormal) {
+TEST(FrameBuffers, ResolvingSupersamplesAveragesColourAndKeepsTheCentreRaysDepthAndNormal) {
   // 2x1 pixels at factor 3: every sub-pixel's colour encodes its position, so the mean is
   // known; the middle sub-pixel (1, 1) of each block alone carries a finite depth and a normal.
   FrameBuffers fine(6, 3, FrameOutputs{.depth = true, .normals = true});
@@ -45,7 +45,7 @@ TEST(FrameBuffers, BoxFilterAveragesColourAndKeepsTheCentreRaysDepthAndNormal) {
   fine.depth(1, 1) = 2.5f, fine.normal(1, 1) = {0, 1, 0};
   fine.depth(4, 1) = 7.0f, fine.normal(4, 1) = {1, 0, 0};
   fine.depth(3, 0) = 9.0f;  // not a centre: never seen
-  const FrameBuffers coarse = box_filter(fine, 3);
+  const FrameBuffers coarse = resolve_supersampled(fine, 3);
   ASSERT_EQ(coarse.width(), 2);
   ASSERT_EQ(coarse.height(), 1);
   EXPECT_FLOAT_EQ(coarse.color(0, 0).r, 1.0f);  // mean of x = 0, 1, 2
@@ -62,7 +62,7 @@ TEST(FrameBuffers, BoxFilterAveragesColourAndKeepsTheCentreRaysDepthAndNormal) {
   // Factor 1 is the identity; buffers the fine frame lacks stay absent.
   FrameBuffers colour_only(4, 2, FrameOutputs{.depth = false, .normals = false});
   colour_only.color(3, 1) = {0.25f, 0.5f, 0.75f, 1};
-  const FrameBuffers same = box_filter(colour_only, 1);
+  const FrameBuffers same = resolve_supersampled(colour_only, 1);
   EXPECT_EQ(same.color, colour_only.color);
   EXPECT_TRUE(same.depth.empty());
   EXPECT_TRUE(same.normal.empty());
