@@ -309,8 +309,8 @@ void run_bench(const BenchOptions& o) {
                                 supersample);
 
   std::cout << fmt::format("bench {} ({}x{}, {} mode) -> {}\n", o.scene, scene.width, scene.height, to_string(scene.mode), o.out);
-  // The truth: the reference renderer, once cold and once warm; supersampled, at `supersample`
-  // times the size and box-filtered down (its times are those of the larger image).
+  // The truth: the reference renderer, once cold and once warm; supersampled (`supersample`
+  // times the size, resolved down by resolve_supersampled), once warm.
   FrameBuffers truth;
   double voxel_size = 1;
   {
