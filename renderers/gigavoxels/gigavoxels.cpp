@@ -359,7 +359,7 @@ class GigaVoxelsRenderer final : public Renderer {
       uses_ = std::make_unique<gigavoxels::UseBuffer>(setup.width, setup.height, p_.slots_per_pixel);
     uses_->begin_frame(frame_);
     states_.assign(size_t(setup.width) * size_t(setup.height), RayState{});
-    frame_exact_ = exact();
+    frame_exact_ = p_.exact || complete_frames_;
     allow_interrupt_ = frame_exact_;
     const double pixel_angle = 2 * std::tan(setup.camera.fov_degrees * kPi / 360.0) / double(setup.height);
     footprint_per_t_ = pixel_angle / geo_.voxel_size / extent_ * lod_ratio_;
@@ -1659,7 +1659,6 @@ class GigaVoxelsRenderer final : public Renderer {
   bool allow_interrupt_ = false;
   bool complete_frames_ = false;  // set_complete_frames()
   bool frame_exact_ = false;      // the frame under way (or the last one) takes exact passes
-  bool exact() const { return p_.exact || complete_frames_; }
   gigavoxels::Compactor compactor_;
   std::vector<uint32_t> used_list_, request_list_;
   /// A brick the loader asked the store for, copied into the pool when it arrives whether or

@@ -28,12 +28,14 @@ testing::CommandResult brickyard(const std::string& args) { return testing::run_
 const std::string kCamera = R"("camera": {"eye": [1.8, -1.2, 1.4], "target": [0.5, 0.5, 0.5], "fov_degrees": 40})";
 const std::string kIso = R"("mode": "iso", "isosurfaces": [{"value": 0.0, "color": [0.9, 0.6, 0.3]}])";
 
-std::vector<std::string> lines_of(const std::string& text) {
+std::vector<std::string> split_on(const std::string& text, char separator) {
   std::vector<std::string> out;
   std::istringstream in(text);
-  for (std::string line; std::getline(in, line);) out.push_back(line);
+  for (std::string part; std::getline(in, part, separator);) out.push_back(part);
   return out;
 }
+std::vector<std::string> lines_of(const std::string& text) { return split_on(text, '\n'); }
+std::vector<std::string> fields_of(const std::string& csv_line) { return split_on(csv_line, ','); }
 
 /// A sphere's signed distance, 32^3 f32 in 16^3 bricks, imported once for the whole suite;
 /// scenes are written next to it and name it relatively.
@@ -234,15 +236,9 @@ TEST_F(CliRender, BenchAgainstASupersampledReferenceFiltersColourAndKeepsCentreD
     ASSERT_EQ(r.exit_code, 0) << r.output;
     const std::vector<std::string> csv = lines_of(testing::read_file(report + "/bench.csv"));
     ASSERT_EQ(csv.size(), 3u);
-    const auto split = [](const std::string& line) {
-      std::vector<std::string> f;
-      std::istringstream in(line);
-      for (std::string c; std::getline(in, c, ',');) f.push_back(c);
-      return f;
-    };
-    const std::vector<std::string> header = split(csv[0]);
+    const std::vector<std::string> header = fields_of(csv[0]);
     for (const auto& [line, into] : {std::pair{csv[1], &reference}, std::pair{csv[2], &row}}) {
-      const std::vector<std::string> fields = split(line);
+      const std::vector<std::string> fields = fields_of(line);
       ASSERT_EQ(fields.size(), header.size()) << line;
       for (size_t i = 0; i < header.size(); ++i) (*into)[header[i]] = fields[i];
     }

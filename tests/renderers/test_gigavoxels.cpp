@@ -290,6 +290,12 @@ class GigaVoxels : public ::testing::Test {
     return parse_scene(text, dir_->file("scene.json"));
   }
   static constexpr const char* kCamera = R"("camera": {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
+  /// Iso at 64x64 on a 2-frame path: kCamera's view, then a jump to the other side.
+  static Scene camera_jump_scene() {
+    const std::string path = R"("camera_path": {"frames": 2, "fov_degrees": 35, "keyframes": [
+      {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45]}, {"eye": [-0.9, 1.9, -0.4], "target": [0.5, 0.5, 0.5]}]})";
+    return scene(iso_scene() + R"(, "quality": {"lod_ratio": 0.5})", 64, path);
+  }
   static testing::TempDir* dir_;
 };
 testing::TempDir* GigaVoxels::dir_ = nullptr;
@@ -787,9 +793,7 @@ TEST_F(GigaVoxels, AStepLongerThanANodeStillEntersAndSearchesEveryNodeItCrosses)
 }
 
 TEST_F(GigaVoxels, ApproximateModeConvergesToExactModeAfterACameraJump) {
-  const std::string path = R"("camera_path": {"frames": 2, "fov_degrees": 35, "keyframes": [
-      {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45]}, {"eye": [-0.9, 1.9, -0.4], "target": [0.5, 0.5, 0.5]}]})";
-  const Scene sc = scene(iso_scene() + R"(, "quality": {"lod_ratio": 0.5})", 64, path);
+  const Scene sc = camera_jump_scene();
   RenderSession exact(sc, backend_options("gigavoxels", {{"exact", 1}}));
   FrameBuffers want, fb;
   exact.render(1, want, kAll);
@@ -808,12 +812,10 @@ TEST_F(GigaVoxels, ApproximateModeConvergesToExactModeAfterACameraJump) {
 }
 
 TEST_F(GigaVoxels, SettlingWithCompleteFramesTakesExactPassesAndShowsTheSameImage) {
-  // A still image's warm-up frames are not shown: completed at once (exact passes), they
-  // converge in one frame where approximate ones take several, to the same image; the frames
+  // A still image's warm-up frames are not shown: completed at once (exact passes), one
+  // converges where approximate ones take several, to the same image; the frames
   // shown afterwards are approximate again (a jump's first frame is one pass, unconverged).
-  const std::string path = R"("camera_path": {"frames": 2, "fov_degrees": 35, "keyframes": [
-      {"eye": [1.8, -1.2, 1.5], "target": [0.5, 0.5, 0.45]}, {"eye": [-0.9, 1.9, -0.4], "target": [0.5, 0.5, 0.5]}]})";
-  const Scene sc = scene(iso_scene() + R"(, "quality": {"lod_ratio": 0.5})", 64, path);
+  const Scene sc = camera_jump_scene();
   RenderSession refined(sc, backend_options("gigavoxels"));
   const int refine_frames = refined.settle(0, kAll);
   RenderSession completed(sc, backend_options("gigavoxels"));
