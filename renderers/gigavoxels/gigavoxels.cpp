@@ -59,6 +59,8 @@ using gigavoxels::FieldBounds;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// DVR at one level: how many sample positions ahead a ray asks for its cells' cache lines.
+constexpr int kPrefetchSamples = 3;
 // Feedback entries: a node address and what the ray wants of it.
 constexpr uint32_t kAddressMask = 0x3fffffffu;
 constexpr uint32_t kWantsSubdivision = 0x80000000u;
@@ -743,6 +745,24 @@ class GigaVoxelsRenderer final : public Renderer {
       brick_cell(b, l, cell, u, c);
       return trilinear(c, u[0], u[1], u[2]);
     }
+    /// Asks for the cache lines of the cell of brick b at brick coordinates l (the four rows
+    /// its 8 voxels lie in) ahead of a sample there, so that loading them overlaps other work.
+    void prefetch_cell(const PathNode& b, const double l[3]) const {
+      const int64_t e = r.m_ + 2;
+      const double top = double(e - 2);
+      int64_t cell[3];
+      for (int a = 0; a < 3; ++a) cell[a] = int64_t(std::min(std::max(0.0, l[a]), top));  // NaN: 0
+      const Voxel* q = b.brick + (cell[2] * e + cell[1]) * e + cell[0];
+      for (const Voxel* row : {q, q + e, q + e * e, q + e * e + e}) {
+#if defined(__x86_64__) || defined(__i386__)
+        // GCC 12 dropped __builtin_prefetch from march_dvr's loop altogether (no prefetch
+        // instruction in the object); the instruction itself is kept.
+        asm volatile("prefetcht0 %0" : : "m"(*row));
+#else
+        __builtin_prefetch(row);
+#endif
+      }
+    }
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t, and
     /// where in the brick's cells t fell (at).
     float sample_brick(const PathNode& b, double t, Vec3d* gradient, CellPoint* at = nullptr) const {
@@ -1296,6 +1316,7 @@ class GigaVoxelsRenderer final : public Renderer {
       // The cell group of the last look showed something: before visible_until (!kOneLevel), or
       // while the sample's group index is visible_group (kOneLevel).
       double t = t_io, visible_until = -kInf;
+      double prefetched_until = -kInf;  // kOneLevel: the sample positions whose cells were asked for
       int visible_group = -1;
       RayState s = ray_state;  // a copy the compiler keeps in registers
       bool finished = false;
@@ -1339,6 +1360,16 @@ class GigaVoxelsRenderer final : public Renderer {
         double l[3];
         if constexpr (kOneLevel) {
           brick_coordinates(fine, t, l);
+          // The cells of the next kPrefetchSamples sample positions at this step (others where
+          // the step grows or a leap lands past them) are asked for ahead: a lit DVR frame of
+          // fBm 1024^3 u16 at 512x512, step 1, 1.11-1.13 s -> 1.07-1.09 s (3 alternations; 8
+          // positions ahead gained nothing). The image is the same byte for byte.
+          for (prefetched_until = std::max(prefetched_until, t); prefetched_until < t + kPrefetchSamples * dt;) {
+            prefetched_until += dt;
+            double ahead[3];
+            for (int a = 0; a < 3; ++a) ahead[a] = l[a] + fine.frame.dir[a] * double(r.m_) * (prefetched_until - t);
+            prefetch_cell(fine, ahead);
+          }
           if (skip_cells) {
             int g[3];
             if (const int i = group_of(l, g); i != visible_group) {
