@@ -59,8 +59,6 @@ using gigavoxels::FieldBounds;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-// DVR at one level: how many sample positions ahead a ray asks for its cells' cache lines.
-constexpr int kPrefetchSamples = 3;
 // Feedback entries: a node address and what the ray wants of it.
 constexpr uint32_t kAddressMask = 0x3fffffffu;
 constexpr uint32_t kWantsSubdivision = 0x80000000u;
@@ -733,7 +731,7 @@ class GigaVoxelsRenderer final : public Renderer {
         cell[a] = std::min<int64_t>(int64_t(x), e - 2);
         u[a] = x - float(cell[a]);
       }
-      const Voxel* q = b.brick + (cell[2] * e + cell[1]) * e + cell[0];
+      const Voxel* q = cell_voxels(b, cell);
       const int64_t dy = e, dz = e * e;
       c[0] = float(q[0]), c[1] = float(q[1]), c[2] = float(q[dy]), c[3] = float(q[dy + 1]);
       c[4] = float(q[dz]), c[5] = float(q[dz + 1]), c[6] = float(q[dz + dy]), c[7] = float(q[dz + dy + 1]);
@@ -745,18 +743,27 @@ class GigaVoxelsRenderer final : public Renderer {
       brick_cell(b, l, cell, u, c);
       return trilinear(c, u[0], u[1], u[2]);
     }
-    /// Asks for the cache lines of the cell of brick b at brick coordinates l (the four rows
-    /// its 8 voxels lie in) ahead of a sample there, so that loading them overlaps other work.
-    void prefetch_cell(const PathNode& b, const double l[3]) const {
+    /// The lower corner voxel of a cell of brick b.
+    const Voxel* cell_voxels(const PathNode& b, const int64_t cell[3]) const {
       const int64_t e = r.m_ + 2;
-      const double top = double(e - 2);
+      return b.brick + (cell[2] * e + cell[1]) * e + cell[0];
+    }
+    /// DVR at one level: how many sample positions ahead a ray asks for their cells (8 gained
+    /// nothing over 3).
+    static constexpr int kPrefetchAhead = 3;
+    /// Asks for the cache lines holding the first voxel of each of the four rows of the cell
+    /// of brick b at brick coordinates l, ahead of a sample there, so that loading them
+    /// overlaps the samples before it. A hint only: nothing read changes.
+    void prefetch_cell(const PathNode& b, const double l[3]) const {
+      const int e = r.m_ + 2;
       int64_t cell[3];
-      for (int a = 0; a < 3; ++a) cell[a] = int64_t(std::min(std::max(0.0, l[a]), top));  // NaN: 0
-      const Voxel* q = b.brick + (cell[2] * e + cell[1]) * e + cell[0];
+      for (int a = 0; a < 3; ++a) cell[a] = child_index(l[a], e - 1);  // as brick_cell clamps (NaN: 0)
+      const Voxel* q = cell_voxels(b, cell);
       for (const Voxel* row : {q, q + e, q + e * e, q + e * e + e}) {
 #if defined(__x86_64__) || defined(__i386__)
-        // GCC 12 dropped __builtin_prefetch from march_dvr's loop altogether (no prefetch
-        // instruction in the object); the instruction itself is kept.
+        // GCC 12 (-O3 -march=x86-64-v3) emitted no prefetch instruction for __builtin_prefetch
+        // here (objdump of the object); an asm volatile statement cannot be removed. prefetcht0
+        // never faults, and the "m" operand only supplies the address.
         asm volatile("prefetcht0 %0" : : "m"(*row));
 #else
         __builtin_prefetch(row);
@@ -1316,7 +1323,7 @@ class GigaVoxelsRenderer final : public Renderer {
       // The cell group of the last look showed something: before visible_until (!kOneLevel), or
       // while the sample's group index is visible_group (kOneLevel).
       double t = t_io, visible_until = -kInf;
-      double prefetched_until = -kInf;  // kOneLevel: the sample positions whose cells were asked for
+      double prefetched_until = -kInf;  // kOneLevel: the farthest sample position whose cell was asked for
       int visible_group = -1;
       RayState s = ray_state;  // a copy the compiler keeps in registers
       bool finished = false;
@@ -1360,11 +1367,15 @@ class GigaVoxelsRenderer final : public Renderer {
         double l[3];
         if constexpr (kOneLevel) {
           brick_coordinates(fine, t, l);
-          // The cells of the next kPrefetchSamples sample positions at this step (others where
-          // the step grows or a leap lands past them) are asked for ahead: a lit DVR frame of
-          // fBm 1024^3 u16 at 512x512, step 1, 1.11-1.13 s -> 1.07-1.09 s (3 alternations; 8
-          // positions ahead gained nothing). The image is the same byte for byte.
-          for (prefetched_until = std::max(prefetched_until, t); prefetched_until < t + kPrefetchSamples * dt;) {
+          // At one level the step is known, so the next positions are: on a volume larger than
+          // the caches a sample's rows often miss, and asking for them a few steps ahead hides
+          // part of that: 3-5% of a lit 512x512 DVR frame of fBm 1024^3 u16 at step 1 (medians
+          // 1.12-1.18 s -> 1.08-1.13 s, 6 alternations). Fragile: the same prefetches in a
+          // counted loop from t, or left out where a leap starts and past the node's exit, lost
+          // the gain. The frame is bound by instructions, not memory: a 64x64 crop of it that
+          // stays in the caches costs as much per sample.
+          prefetched_until = std::max(prefetched_until, t);
+          for (int k = 0; k < kPrefetchAhead && prefetched_until < t + kPrefetchAhead * dt; ++k) {
             prefetched_until += dt;
             double ahead[3];
             for (int a = 0; a < 3; ++a) ahead[a] = l[a] + fine.frame.dir[a] * double(r.m_) * (prefetched_until - t);
