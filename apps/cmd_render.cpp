@@ -124,7 +124,7 @@ void run_render(const RenderOptions& o) {
     // their data arrives), and none before it: those are completed at once. A camera path is
     // flown frame by frame unless --settle, which counts the frames a viewer sees converge.
     int settle_frames = 0;
-    if (!scene.has_path) settle_frames = session.settle(f, outputs, 500, RenderSession::Settle::complete);
+    if (!scene.has_path) settle_frames = session.settle(f, outputs, RenderSession::kMaxSettleFrames, RenderSession::Settle::complete);
     else if (o.settle) settle_frames = session.settle(f, outputs);
     const FrameStats stats = session.render(f, fb, outputs);
     write_png(frame_path(o.out, f, several), to_rgba8(fb.color));
@@ -217,7 +217,7 @@ BenchRow measure(RenderSession& session, int frame, int cold, int warm, const Fr
   }
   // Warm: the cache filled and the back end converged (asynchronous back ends refine over
   // frames as their data arrives).
-  row.settle_frames = session.settle(frame, outputs, 500, RenderSession::Settle::complete);
+  row.settle_frames = session.settle(frame, outputs, RenderSession::kMaxSettleFrames, RenderSession::Settle::complete);
   for (int i = 0; i < warm; ++i) {
     stats = session.render(frame, last, outputs);
     warm_s.push_back(stats.seconds);

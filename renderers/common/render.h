@@ -48,6 +48,8 @@ class RenderSession {
   void reset_cache();
   /// @brief Whether the back end's last frame was complete (see Renderer::converged()).
   bool converged() const;
+  /// @brief The most frames settle() renders by default before it gives up on converging.
+  static constexpr int kMaxSettleFrames = 500;
   /// @brief How settle() renders the frames before the converged one.
   enum class Settle {
     refine,    ///< as they would be shown: the frames taken are the frames to converge
@@ -58,7 +60,7 @@ class RenderSession {
   /// Settle::complete, frames are completed at once until one converges, then rendered as
   /// they would be shown until one of those converges too (usually the next): the count is
   /// then not the frames a viewer would see converge.
-  int settle(int frame, const FrameOutputs& outputs, int max_frames = 500, Settle how = Settle::refine);
+  int settle(int frame, const FrameOutputs& outputs, int max_frames = kMaxSettleFrames, Settle how = Settle::refine);
 
  private:
   void build();

@@ -819,7 +819,7 @@ TEST_F(GigaVoxels, SettlingWithCompleteFramesTakesExactPassesAndShowsTheSameImag
   RenderSession refined(sc, backend_options("gigavoxels"));
   const int refine_frames = refined.settle(0, kAll);
   RenderSession completed(sc, backend_options("gigavoxels"));
-  const int complete_frames = completed.settle(0, kAll, 500, RenderSession::Settle::complete);
+  const int complete_frames = completed.settle(0, kAll, RenderSession::kMaxSettleFrames, RenderSession::Settle::complete);
   EXPECT_GE(refine_frames, 3);
   EXPECT_EQ(complete_frames, 2);  // one complete frame, then one as shown, already converged
   EXPECT_TRUE(completed.converged());
