@@ -109,7 +109,7 @@ class CellAccessor {
 
 /// @brief Trilinear interpolation of corners c (index dx + 2 dy + 4 dz) at local u in [0,1]^3.
 template <typename V>
-inline V trilinear(const V c[8], V ux, V uy, V uz) {
+[[gnu::always_inline]] inline V trilinear(const V c[8], V ux, V uy, V uz) {
   const V x00 = c[0] + (c[1] - c[0]) * ux, x10 = c[2] + (c[3] - c[2]) * ux;
   const V x01 = c[4] + (c[5] - c[4]) * ux, x11 = c[6] + (c[7] - c[6]) * ux;
   const V y0 = x00 + (x10 - x00) * uy, y1 = x01 + (x11 - x01) * uy;
@@ -132,7 +132,7 @@ inline Vec3<V> trilinear_gradient(const V c[8], V ux, V uy, V uz) {
 /// interpolated values, so the corners are taken relative to c[0] first: their rounding then
 /// scales with the cell's variation, as trilinear_gradient()'s does, not with its values.
 template <typename V>
-inline V trilinear_with_gradient(const V c[8], V ux, V uy, V uz, Vec3<V>& g) {
+[[gnu::always_inline]] inline V trilinear_with_gradient(const V c[8], V ux, V uy, V uz, Vec3<V>& g) {
   const V c1 = c[1] - c[0], c2 = c[2] - c[0], c3 = c[3] - c[0];
   const V c4 = c[4] - c[0], c5 = c[5] - c[0], c6 = c[6] - c[0], c7 = c[7] - c[0];
   const V x00 = c1 * ux, x10 = c2 + (c3 - c2) * ux;

@@ -86,6 +86,32 @@ class ShadingModel {
     if (nh > 0) l.specular = float(shininess_power_ ? pow_uint(nh, shininess_power_) : std::pow(nh, double(s_.shininess)));
     return l;
   }
+  /// @brief lighting_of_gradient() for kLanes gradients g (per axis, then lane) side by side,
+  /// in loops the compiler vectorises, each normal's inverse length taken from its gradient.
+  /// A lane whose squared length is 0 or not finite gets no meaningful result: the caller's.
+  template <int kLanes>
+  void lighting_of_gradients(const double (&g)[3][kLanes], const Vec3d& light, const Vec3d& half, float (&diffuse)[kLanes],
+                             float (&specular)[kLanes]) const {
+    double nh[kLanes];
+    for (int k = 0; k < kLanes; ++k) {
+      const Vec3d gk(g[0][k], g[1][k], g[2][k]);
+      const double inv_length = 1 / std::sqrt(dot(gk, gk));
+      diffuse[k] = float(std::fabs(dot(gk, light)) * inv_length);
+      nh[k] = std::fabs(dot(gk, half)) * inv_length;
+    }
+    if (!shininess_power_) {
+      for (int k = 0; k < kLanes; ++k) specular[k] = nh[k] > 0 ? float(std::pow(nh[k], double(s_.shininess))) : 0.0f;
+      return;
+    }
+    double power[kLanes];  // pow_uint, the lanes side by side
+    for (int k = 0; k < kLanes; ++k) power[k] = 1;
+    for (unsigned n = shininess_power_; n; n >>= 1) {
+      if (n & 1)
+        for (int k = 0; k < kLanes; ++k) power[k] *= nh[k];
+      for (int k = 0; k < kLanes; ++k) nh[k] *= nh[k];
+    }
+    for (int k = 0; k < kLanes; ++k) specular[k] = power[k] > 0 ? float(power[k]) : 0.0f;
+  }
   Vec3f apply(const Vec3f& base, const Lighting& l) const {
     if (!lit()) return base;
     const Vec3f lc = s_.light_color;
