@@ -88,7 +88,8 @@ class ShadingModel {
   }
   /// @brief lighting_of_gradient() for kLanes gradients g (per axis, then lane) side by side,
   /// in loops the compiler vectorises, each normal's inverse length taken from its gradient.
-  /// A lane whose squared length is 0 or not finite gets no meaningful result: the caller's.
+  /// A lane whose squared length is 0 or not finite gets no meaningful result (a division by
+  /// zero, in IEEE arithmetic): the caller's.
   template <int kLanes>
   void lighting_of_gradients(const double (&g)[3][kLanes], const Vec3d& light, const Vec3d& half, float (&diffuse)[kLanes],
                              float (&specular)[kLanes]) const {

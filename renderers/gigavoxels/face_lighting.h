@@ -46,16 +46,16 @@ inline float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
 inline void front_lighting_weights(const int32_t (&cell)[3][9], const float (&u)[3][9], float (&weight)[8]) {
   using Floats = float __attribute__((vector_size(32)));
   using Ints = int32_t __attribute__((vector_size(32)));
-  const auto load = [](const auto* p, auto v) {
-    std::memcpy(&v, p, sizeof v);
-    return v;
-  };
   Floats first = Floats{} + 1.0f, last = Floats{};
   for (int a = 0; a < 3; ++a) {
-    const Ints c0 = load(&cell[a][0], Ints{}), c1 = load(&cell[a][1], Ints{});
-    const Floats u0 = load(&u[a][0], Floats{}), u1 = load(&u[a][1], Floats{});
+    Ints c0, c1;  // (copied into locals: no vector passes through a call, whose ABI differs without AVX)
+    Floats u0, u1;
+    std::memcpy(&c0, &cell[a][0], sizeof c0), std::memcpy(&c1, &cell[a][1], sizeof c1);
+    std::memcpy(&u0, &u[a][0], sizeof u0), std::memcpy(&u1, &u[a][1], sizeof u1);
     const Floats l0 = __builtin_convertvector(c0, Floats) + u0;
-    // Where the cell stays the same, the span may be 0: its quotients are not used.
+    // Where the cell stays the same, the span may be 0 and its quotients infinite or NaN: they
+    // are not used (a float division by zero is not undefined: IEEE 754, and UBSan's
+    // -fsanitize=undefined leaves it alone).
     const Floats inv_span = 1.0f / (__builtin_convertvector(c1 - c0, Floats) + (u1 - u0));
     const Ints up = (c1 > c0) & 1;  // the first face crossed is c0 + 1 going up, c0 going down; the last c1 or c1 + 1
     const Floats to_first = (__builtin_convertvector(c0 + up, Floats) - l0) * inv_span;

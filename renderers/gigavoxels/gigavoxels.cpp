@@ -1592,10 +1592,13 @@ class GigaVoxelsRenderer final : public Renderer {
             px.depth = tk[k];
             if (setup.outputs.normals) px.normal = normal_of(Vec3d(gradient[0][k], gradient[1][k], gradient[2][k]), ray);
           }
-          if (s.alpha >= stop) {
-            counters.samples += uint64_t(k + 1);  // the samples past it were not the ray's
-            return Run::finished;
-          }
+        }
+        // After every sample, as march_dvr checks (a termination opacity of 0 ends at the first).
+        if (s.alpha >= stop) {
+          // The samples past it were not the ray's. The state keeps the run's start: a
+          // finished ray reads only its colour and opacity.
+          counters.samples += uint64_t(k + 1);
+          return Run::finished;
         }
       }
       counters.samples += uint64_t(n);
@@ -1943,7 +1946,8 @@ BackendEntry gigavoxels_backend() {
       {"face_lighting", 1, 0, 1, "lit DVR: 1 weights a segment's two end lightings by where it crosses cell faces (where the "
                                  "analytic gradient jumps; analytic normals only); 0: their mean"},
       {"sample_runs", 1, 0, 1, "DVR at one level: 1 takes runs of up to 8 samples along a ray side by side (SIMD), the "
-                               "adaptive step fixed for a run; 0: one sample at a time"},
+                               "adaptive step fixed for a run (not under a point light, nor with difference normals); 0: "
+                               "one sample at a time"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};

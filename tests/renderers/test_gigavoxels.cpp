@@ -481,9 +481,15 @@ TEST(GigaVoxelsFaceLighting, EachEndStandsForItsOwnCellAndTheirMeanForTheCellsBe
   float run_u[3][9];
   float run_weight[8];
   std::vector<float> one_by_one;
+  double prev_l0[3] = {};
   for (int n = 0; n < 2000; ++n) {
     double l0[3], l1[3];
     for (int k = 0; k < 3; ++k) l0[k] = pos(rng), l1[k] = std::clamp(l0[k] + delta(rng) * (n % 4 == 0 ? 0.2 : 1.0), 0.0, 32.999);
+    // Runs also repeat a point (a run's spare lanes do) or stay in its cell on some axes: the
+    // lanes whose spans are 0.
+    if (n % 9 > 0 && n % 3 == 1)
+      for (int k = 0; k < 3; ++k) l0[k] = n % 6 == 1 || k == 0 ? prev_l0[k] : std::floor(prev_l0[k]) + 0.5 * (prev_l0[k] - std::floor(prev_l0[k]));
+    std::copy_n(l0, 3, prev_l0);
     const CellPoint a = at(l0[0], l0[1], l0[2]), b = at(l1[0], l1[1], l1[2]);
     const float w = front_lighting_weight(a, b);
     if (n % 9 == 0) one_by_one.clear();
@@ -733,9 +739,15 @@ TEST_F(GigaVoxels, SampleRunsTakeTheSamplesOneAtATimeTakes) {
     EXPECT_EQ(run_counters.samples, one_counters.samples);
     EXPECT_EQ(run_counters.gradients, one_counters.gradients);
     const ImageError e = compare_frames(run, one, 1.0);
-    EXPECT_LT(e.rmse, 1e-6) << e.to_json();
     EXPECT_EQ(e.coverage_mismatch, 0u) << e.to_json();
     EXPECT_LT(e.depth_max, 1e-6) << e.to_json();
+    EXPECT_LT(e.normal_p99_deg, 1e-3) << e.to_json();
+    float worst = 0;  // the lanes' fused arithmetic may round apart from the scalar's
+    for (size_t i = 0; i < one.color.size(); ++i) {
+      const auto &a = one.color.data()[i], &b = run.color.data()[i];
+      worst = std::max({worst, std::abs(a.r - b.r), std::abs(a.g - b.g), std::abs(a.b - b.b), std::abs(a.a - b.a)});
+    }
+    EXPECT_LE(worst, 1e-6f);
 
     const FrameBuffers truth = reference_frame(sc);
     FrameBuffers one_adaptive, run_adaptive;
@@ -743,9 +755,22 @@ TEST_F(GigaVoxels, SampleRunsTakeTheSamplesOneAtATimeTakes) {
     const double one_rmse = compare_frames(one_adaptive, truth, 1.0).rmse, run_rmse = compare_frames(run_adaptive, truth, 1.0).rmse;
     EXPECT_LE(run_rmse, 1.02 * one_rmse);
     EXPECT_LE(run_adaptive_counters.samples, 1.15 * double(one_adaptive_counters.samples));
+    // Runs hold the adaptive step, so they take other samples: proof that they ran at all.
+    const bool point_light = std::string(c.shading).find("point") != std::string::npos;
+    EXPECT_EQ(run_adaptive_counters.samples == one_adaptive_counters.samples, point_light);
     std::cout << "[ measured ] " << c.shading << ", adaptive step: one at a time RMSE " << one_rmse << " in "
               << one_adaptive_counters.samples << " samples, in runs " << run_rmse << " in " << run_adaptive_counters.samples << "\n";
   }
+  // A termination opacity of 0 ends a ray at its first sample, in a run as one at a time.
+  const Scene stop_at_once = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.25, "termination_opacity": 0})", 32);
+  FrameBuffers fb[2];
+  uint64_t samples[2];
+  for (int runs = 0; runs < 2; ++runs) {
+    RenderSession g(stop_at_once, backend_options("gigavoxels", {{"exact", 1}, {"step", 0.5}, {"adaptive_step", 1}, {"sample_runs", double(runs)}}));
+    samples[runs] = g.render(0, fb[runs], kAll).counters.samples;
+  }
+  EXPECT_EQ(samples[1], samples[0]);
+  EXPECT_LT(compare_frames(fb[1], fb[0], 1.0).rmse, 1e-6);
 }
 
 TEST_F(GigaVoxels, DvrLeapsClearGroupsWhereTwoLevelsBlend) {
