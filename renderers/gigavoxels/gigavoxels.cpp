@@ -1456,8 +1456,8 @@ class GigaVoxelsRenderer final : public Renderer {
     enum class Run { none, advanced, finished };
     /// march_dvr<true>'s samples from t on, up to kRunLanes of them, taken side by side: the
     /// positions one by one (the cell group look, as march_dvr's), then the cells, values and
-    /// gradients, lighting, segments and face weights of all of them in loops the compiler
-    /// vectorises, then the compositing in order. The same samples and arithmetic as one at a
+    /// gradients and lighting of all of them in loops the compiler vectorises, the face weights
+    /// in vector extensions, the segments one by one, then the compositing in order. The same samples and arithmetic as one at a
     /// time, but for the step: it stays dt across the run, where the adaptive step would grow
     /// it after each visible segment. The run ends before the node's exit (t_end) and before
     /// a sample whose cell group is clear (the leap is march_dvr's). Needs a segment open
