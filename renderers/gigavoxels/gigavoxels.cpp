@@ -1529,18 +1529,13 @@ class GigaVoxelsRenderer final : public Renderer {
         }
       }
       // Segments from each sample's predecessor.
-      float front[L], back[L], red[L], green[L], blue[L], alpha[L];
-      double voxels[L];
-      for (int k = 0; k < L; ++k) {
-        front[k] = value[k], back[k] = value[k + 1];
-        voxels[k] = to_voxels(tk[k] - (k == 0 ? s.prev_t : tk[k - 1]), unit_per_t);
-      }
       // One by one: vectorised (GCC's loop vectoriser, with the table's rows gathered) it
       // cost 1.6x the instructions, computing every lane's common case and then the rest.
+      Vec3f color[L];
+      float alpha[L];
       for (int k = 0; k < n; ++k) {
-        Vec3f c;
-        r.preintegrated_.segment(front[k], back[k], voxels[k], c, alpha[k]);
-        red[k] = c.x, green[k] = c.y, blue[k] = c.z;
+        const double voxels = to_voxels(tk[k] - (k == 0 ? s.prev_t : tk[k - 1]), unit_per_t);
+        r.preintegrated_.segment(value[k], value[k + 1], voxels, color[k], alpha[k]);
       }
       // Lighting at each sample (lighting_at), and each segment's face weight.
       bool normal[L];
@@ -1584,7 +1579,7 @@ class GigaVoxelsRenderer final : public Renderer {
                 k == 0 ? s.prev_lighting : ShadingModel::Lighting{diffuse[k - 1], specular[k - 1]};
             light = front_light.mix(here, weight[k]);
           }
-          const Vec3f c = r.shading_.apply(Vec3f(red[k], green[k], blue[k]), lit ? light : none);
+          const Vec3f c = r.shading_.apply(color[k], lit ? light : none);
           const double a = alpha[k];
           s.accum += Vec3d(c) * ((1 - s.alpha) * a);
           s.alpha += (1 - s.alpha) * a;
