@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 
 #include "renderers/common/renderer.h"
@@ -87,31 +89,45 @@ class ShadingModel {
     return l;
   }
   /// @brief lighting_of_gradient() for kLanes gradients g (per axis, then lane) side by side,
-  /// in loops the compiler vectorises, each normal's inverse length taken from its gradient.
-  /// A lane whose squared length is 0 or not finite gets no meaningful result (a division by
-  /// zero, in IEEE arithmetic): the caller's.
+  /// four lanes of doubles to a vector (GCC's vector extension: AVX where the target has it;
+  /// GCC 12 left the same loops on arrays scalar), each normal's inverse length taken from its
+  /// gradient, with lighting_of_gradient()'s arithmetic. A lane whose squared length is 0 or
+  /// not finite gets no meaningful result (a division by zero, in IEEE arithmetic): the caller's.
   template <int kLanes>
   void lighting_of_gradients(const double (&g)[3][kLanes], const Vec3d& light, const Vec3d& half, float (&diffuse)[kLanes],
                              float (&specular)[kLanes]) const {
-    double nh[kLanes];
-    for (int k = 0; k < kLanes; ++k) {
-      const Vec3d gk(g[0][k], g[1][k], g[2][k]);
-      const double inv_length = 1 / std::sqrt(dot(gk, gk));
-      diffuse[k] = float(std::fabs(dot(gk, light)) * inv_length);
-      nh[k] = std::fabs(dot(gk, half)) * inv_length;
+    using Doubles = double __attribute__((vector_size(32)));
+    using Longs = int64_t __attribute__((vector_size(32)));
+    using Floats = float __attribute__((vector_size(16)));
+    constexpr int kWidth = 4;
+    static_assert(kLanes % kWidth == 0, "whole vectors of lanes");
+    const Longs magnitude = Longs{} + std::numeric_limits<int64_t>::max();  // every bit but the sign: fabs
+    for (int h = 0; h < kLanes; h += kWidth) {
+      Doubles x, y, z;  // (copied into locals: no vector passes through a call, whose ABI differs without AVX)
+      std::memcpy(&x, &g[0][h], sizeof x), std::memcpy(&y, &g[1][h], sizeof y), std::memcpy(&z, &g[2][h], sizeof z);
+      const Doubles length2 = x * x + y * y + z * z;  // dot(g, g)
+      Doubles root;
+#if defined(__AVX__) && defined(__GNUC__)
+      root = __builtin_ia32_sqrtpd256(length2);
+#else
+      for (int k = 0; k < kWidth; ++k) root[k] = std::sqrt(length2[k]);
+#endif
+      const Doubles inv_length = 1 / root;
+      const Doubles nl = x * light.x + y * light.y + z * light.z, nh0 = x * half.x + y * half.y + z * half.z;
+      const Doubles d = (Doubles)((Longs)nl & magnitude) * inv_length;
+      Doubles nh = (Doubles)((Longs)nh0 & magnitude) * inv_length;
+      Doubles power = Doubles{} + 1.0;
+      if (shininess_power_) {
+        for (unsigned n = shininess_power_; n; n >>= 1) {  // pow_uint, the lanes side by side
+          if (n & 1) power *= nh;
+          nh *= nh;
+        }
+      } else {
+        for (int k = 0; k < kWidth; ++k) power[k] = nh[k] > 0 ? std::pow(nh[k], double(s_.shininess)) : 0.0;
+      }
+      const Floats df = __builtin_convertvector(d, Floats), sf = __builtin_convertvector(power > 0 ? power : Doubles{}, Floats);
+      std::memcpy(&diffuse[h], &df, sizeof df), std::memcpy(&specular[h], &sf, sizeof sf);
     }
-    if (!shininess_power_) {
-      for (int k = 0; k < kLanes; ++k) specular[k] = nh[k] > 0 ? float(std::pow(nh[k], double(s_.shininess))) : 0.0f;
-      return;
-    }
-    double power[kLanes];  // pow_uint, the lanes side by side
-    for (int k = 0; k < kLanes; ++k) power[k] = 1;
-    for (unsigned n = shininess_power_; n; n >>= 1) {
-      if (n & 1)
-        for (int k = 0; k < kLanes; ++k) power[k] *= nh[k];
-      for (int k = 0; k < kLanes; ++k) nh[k] *= nh[k];
-    }
-    for (int k = 0; k < kLanes; ++k) specular[k] = power[k] > 0 ? float(power[k]) : 0.0f;
   }
   Vec3f apply(const Vec3f& base, const Lighting& l) const {
     if (!lit()) return base;

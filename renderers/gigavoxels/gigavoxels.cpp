@@ -40,6 +40,7 @@
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/cell_groups.h"
+#include "renderers/gigavoxels/corner_lanes.h"
 #include "renderers/gigavoxels/face_lighting.h"
 #include "renderers/gigavoxels/feedback.h"
 #include "renderers/gigavoxels/field_bounds.h"
@@ -891,7 +892,10 @@ class GigaVoxelsRenderer final : public Renderer {
     /// The cell group holding brick coordinates l (clamped into the brick).
     int group_of(const double l[3], int g[3]) const {
       const double top = double(r.m_ + 1);
-      for (int a = 0; a < 3; ++a) g[a] = int(unsigned(std::min(std::max(l[a], 0.0), top)) / unsigned(kCellGroup));  // >= 0
+      // Through int, not unsigned: a double's conversion to unsigned is a branchy sequence
+      // before AVX-512; unsigned division by the power of two is a shift. NaN clamps to 0.
+      // (sample_run computes the same in lanes.)
+      for (int a = 0; a < 3; ++a) g[a] = int(unsigned(int(l[a] > 0 ? std::min(l[a], top) : 0.0)) / unsigned(kCellGroup));
       return (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
     }
     /// Where the ray leaves (or enters) the cube of groups centred on group g that its distance
@@ -1466,90 +1470,123 @@ class GigaVoxelsRenderer final : public Renderer {
                    double stop, int& visible_group, CellPoint& prev_at, const PathNode*& prev_lattice, bool face_lighting,
                    const PrimaryRay& ray) {
       constexpr int L = kRunLanes;
-      double tk[L], lk[3][L];
-      int n = 0;
-      for (double tn = t; n < L && tn < t_end; tn += dt) {
-        double l[3];
-        brick_coordinates(b, tn, l);
-        if (r.p_.skip_cells) {
-          int g[3];
-          if (const int i = group_of(l, g); i != visible_group) {
-            if (b.group_distances[i] != 0) break;
-            visible_group = i;
-          }
+      // GCC's vector extension: AVX2 where the target has it (x86-64-v3 is the build's floor).
+      // GCC 12's loop vectoriser left most of these lanes scalar, with their arrays spilled.
+      using Floats = float __attribute__((vector_size(32)));
+      using Ints = int32_t __attribute__((vector_size(32)));
+      using Doubles = double __attribute__((vector_size(32)));  // half the lanes
+      using Floats4 = float __attribute__((vector_size(16)));
+      using Ints4 = int32_t __attribute__((vector_size(16)));
+      constexpr int H = L / 2;
+      static_assert(kCellGroup == 4, "a cell group's index is a shift by 2");
+      // Positions one step after another, as march_dvr takes them; then their brick coordinates
+      // (brick_coordinates, read in float as sample_brick_at reads them) and cell groups
+      // (group_of) side by side.
+      double tk[L];
+      tk[0] = t;
+      for (int k = 1; k < L; ++k) tk[k] = tk[k - 1] + dt;
+      const double m = double(r.m_);
+      const Doubles group_top = Doubles{} + double(r.m_ + 1);
+      float lf[3][L];
+      int32_t group[L];
+      for (int h = 0; h < L; h += H) {
+        Doubles th;
+        std::memcpy(&th, &tk[h], sizeof th);
+        Ints4 g[3];
+        for (int a = 0; a < 3; ++a) {
+          const Doubles l = (b.frame.eye[a] + b.frame.dir[a] * th) * m + 0.5;
+          const Floats4 f = __builtin_convertvector(l, Floats4);
+          std::memcpy(&lf[a][h], &f, sizeof f);
+          const Doubles clamped = l > 0 ? (l < group_top ? l : group_top) : Doubles{};  // NaN: 0
+          g[a] = __builtin_convertvector(clamped, Ints4) >> 2;
         }
-        tk[n] = tn;
-        for (int a = 0; a < 3; ++a) lk[a][n] = l[a];
-        ++n;
+        const Ints4 index = (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
+        std::memcpy(&group[h], &index, sizeof index);
       }
+      int n = 0;
+      for (; n < L && tk[n] < t_end; ++n)
+        if (r.p_.skip_cells && group[n] != visible_group) {
+          if (b.group_distances[group[n]] != 0) break;
+          visible_group = group[n];
+        }
       if (n == 0) return Run::none;
-      for (int k = n; k < L; ++k) {  // spare lanes repeat the last sample
-        tk[k] = tk[n - 1];
-        for (int a = 0; a < 3; ++a) lk[a][k] = lk[a][n - 1];
-      }
       // Cells and values: brick_cell and sample_brick_at. Point 0 is the previous sample (face
-      // weights), the run's samples are points 1..L.
-      const int e = r.m_ + 2;
-      const float top = float(e - 1);
+      // weights), the run's samples are points 1..L. Lanes past n sample past the run, inside
+      // the brick (clamped as every sample is), and are not used.
+      const int32_t e = r.m_ + 2;
       int32_t cell[3][L + 1];
       float u[3][L + 1];
       for (int a = 0; a < 3; ++a) cell[a][0] = prev_at.cell[a], u[a][0] = prev_at.u[a];
-      for (int k = 0; k < L; ++k)
-        for (int a = 0; a < 3; ++a) {
-          const float x = std::clamp(float(lk[a][k]), 0.0f, top);
-          cell[a][k + 1] = std::min(int32_t(x), e - 2);
-          u[a][k + 1] = x - float(cell[a][k + 1]);
-        }
-      float corner[8][L];
-      for (int k = 0; k < L; ++k) {
-        const Voxel* q = b.brick + (cell[2][k + 1] * e + cell[1][k + 1]) * e + cell[0][k + 1];
-        const int dy = e, dz = e * e;
-        corner[0][k] = float(q[0]), corner[1][k] = float(q[1]), corner[2][k] = float(q[dy]), corner[3][k] = float(q[dy + 1]);
-        corner[4][k] = float(q[dz]), corner[5][k] = float(q[dz + 1]), corner[6][k] = float(q[dz + dy]);
-        corner[7][k] = float(q[dz + dy + 1]);
+      Floats uf[3];
+      Ints offset = {};
+      const Floats cell_top = Floats{} + float(e - 1);
+      const Ints last_cell = Ints{} + (e - 2);
+      for (int a = 2; a >= 0; --a) {
+        Floats x;
+        std::memcpy(&x, lf[a], sizeof x);
+        x = x > 0.0f ? (x < cell_top ? x : cell_top) : Floats{};  // std::clamp (NaN: 0)
+        Ints c = __builtin_convertvector(x, Ints);
+        c = c < last_cell ? c : last_cell;
+        uf[a] = x - __builtin_convertvector(c, Floats);
+        std::memcpy(&cell[a][1], &c, sizeof c), std::memcpy(&u[a][1], &uf[a], sizeof uf[a]);
+        offset = offset * e + c;  // (cell z * e + cell y) * e + cell x
       }
+      int32_t offsets[L];
+      std::memcpy(offsets, &offset, sizeof offsets);
+      float corners[8][L];
+      gigavoxels::load_cell_corners(b.brick, offsets, e, corners);
+      Floats corner[8];
+      for (int i = 0; i < 8; ++i) std::memcpy(&corner[i], corners[i], sizeof corner[i]);
       float value[L + 1];  // point 0: the previous sample's
-      double gradient[3][L];
       value[0] = s.prev_value;
-      const double to_unit = b.scale * double(r.m_);  // brick voxels to unit coordinates
+      double gradient[3][L];
+      bool normal[L];
+      const double to_unit = b.scale * m;  // brick voxels to unit coordinates
       if (gradients) {
-        for (int k = 0; k < L; ++k) {
-          const float c[8] = {corner[0][k], corner[1][k], corner[2][k], corner[3][k],
-                              corner[4][k], corner[5][k], corner[6][k], corner[7][k]};
-          Vec3f g;
-          value[k + 1] = trilinear_with_gradient(c, u[0][k + 1], u[1][k + 1], u[2][k + 1], g);
-          for (int a = 0; a < 3; ++a) gradient[a][k] = double(g[a]) * to_unit;
+        Vec3<Floats> g;
+        const Floats v = trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g);
+        std::memcpy(&value[1], &v, sizeof v);
+        for (int h = 0; h < L; h += H) {
+          Doubles gd[3];
+          for (int a = 0; a < 3; ++a) {
+            const Floats4 part = h == 0 ? __builtin_shufflevector(g[a], g[a], 0, 1, 2, 3) : __builtin_shufflevector(g[a], g[a], 4, 5, 6, 7);
+            gd[a] = __builtin_convertvector(part, Doubles) * to_unit;
+            std::memcpy(&gradient[a][h], &gd[a], sizeof gd[a]);
+          }
+          const auto has = (gd[0] != 0) | (gd[1] != 0) | (gd[2] != 0);
+          for (int k = 0; k < H; ++k) normal[h + k] = has[k] != 0;
         }
       } else {
-        for (int k = 0; k < L; ++k) {
-          const float c[8] = {corner[0][k], corner[1][k], corner[2][k], corner[3][k],
-                              corner[4][k], corner[5][k], corner[6][k], corner[7][k]};
-          value[k + 1] = trilinear(c, u[0][k + 1], u[1][k + 1], u[2][k + 1]);
-          for (int a = 0; a < 3; ++a) gradient[a][k] = 0;
-        }
+        const Floats v = trilinear(corner, uf[0], uf[1], uf[2]);
+        std::memcpy(&value[1], &v, sizeof v);
+        std::fill_n(&gradient[0][0], 3 * L, 0.0);
+        std::fill_n(normal, L, false);
       }
       // Segments from each sample's predecessor.
-      // One by one: vectorised (GCC's loop vectoriser, with the table's rows gathered) it
-      // cost 1.6x the instructions, computing every lane's common case and then the rest.
       Vec3f color[L];
       float alpha[L];
-      for (int k = 0; k < n; ++k) {
-        const double voxels = to_voxels(tk[k] - (k == 0 ? s.prev_t : tk[k - 1]), unit_per_t);
-        r.preintegrated_.segment(value[k], value[k + 1], voxels, color[k], alpha[k]);
-      }
+      double length[L];
+      for (int k = 0; k < n; ++k) length[k] = to_voxels(tk[k] - (k == 0 ? s.prev_t : tk[k - 1]), unit_per_t);
+      r.preintegrated_.segments<L>(value, length, n, color, alpha);
       // Lighting at each sample (lighting_at), and each segment's face weight.
-      bool normal[L];
       float diffuse[L] = {}, specular[L] = {};
-      for (int k = 0; k < L; ++k) normal[k] = gradients && (gradient[0][k] != 0 || gradient[1][k] != 0 || gradient[2][k] != 0);
       const bool lit = gradients && r.shading_.lit();
       if (lit) {
         double world[3][L];
         for (int a = 0; a < 3; ++a)
           for (int k = 0; k < L; ++k) world[a][k] = gradient[a][k] * r.unit_gradient_to_world_[a];
         r.shading_.lighting_of_gradients(world, ray_light, ray_half, diffuse, specular);
-        for (int k = 0; k < n; ++k) {  // zero gradients have none; the rest as lighting_at takes them
+        // Zero gradients have no lighting; the rest are lit as lighting_at would light them
+        // but for a gradient too small or too large to normalise, or a sample at the eye.
+        bool any_falls_back = false;
+        bool falls_back[L];
+        for (int k = 0; k < n; ++k) {
           const double length2 = world[0][k] * world[0][k] + world[1][k] * world[1][k] + world[2][k] * world[2][k];
-          if (normal[k] && length2 > 0 && length2 < kInf && tk[k] > 0) continue;
+          falls_back[k] = !(normal[k] && length2 > 0 && length2 < kInf && tk[k] > 0);
+          any_falls_back |= falls_back[k];
+        }
+        for (int k = 0; any_falls_back && k < n; ++k) {
+          if (!falls_back[k]) continue;
           const Vec3d g(gradient[0][k], gradient[1][k], gradient[2][k]);
           const ShadingModel::Lighting l = normal[k] ? lighting_at(tk[k], g, ray) : ShadingModel::Lighting{};
           counters.gradients -= normal[k];  // counted below, as for every lane

@@ -8,8 +8,10 @@
 /// neglected, as in the 2D tables' usual construction.
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -51,6 +53,13 @@ class PreintegratedTf {
     while (first < point_.size() && point_[first].tau == 0) ++first;
     clear_up_to_ = first == 0 ? -kInfinity : first == point_.size() ? kInfinity : lo_ + double(first - 1) * dv_;
     last_ = n - 1;
+    // One row past the last, equal to it: segments() interpolates at the last position
+    // (weight 0 on the row after) without a test.
+    integral_.push_back(integral_.back());
+    for (const bool upper : {false, true}) {
+      const Entry& p = point_[upper ? size_t(last_) : 0];
+      end_slope_[upper] = {p.tau, Vec3d(p.color)};
+    }
   }
 
   /// @brief The segment's opacity and colour (not premultiplied) for a value going linearly
@@ -77,15 +86,102 @@ class PreintegratedTf {
     color = tau > 1e-12 ? Vec3f(ctau * (1.0 / tau)) : Vec3f(0.0f);
   }
 
+  /// @brief segment() for the n segments of a run of samples (n <= kLanes), side by side:
+  /// segment k goes from value[k] to value[k + 1] over length[k] finest voxels. The same
+  /// arithmetic, and so the same results, with each value's running integrals looked up once
+  /// for the segments on both sides of it (one by one, segment() looks each up twice), and
+  /// the opacities in vector lanes. Segments whose ends are too close for a difference of
+  /// integrals (the midpoint's extinction stands in) are left to segment(), as are no others.
+  template <int kLanes>
+  void segments(const float (&value)[kLanes + 1], const double (&length)[kLanes], int n, Vec3f (&color)[kLanes],
+                float (&alpha)[kLanes]) const {
+    static_assert(kLanes == 8, "opacities in lanes are 8 floats (AVX2)");
+    double x[kLanes + 1];
+    for (int k = 0; k <= kLanes; ++k) x[k] = position(value[k]);
+    Row at[kLanes + 1];
+    for (int k = 0; k <= n; ++k) at[k] = integral_row(x[k]);
+    float extinction[kLanes] = {};  // tau times the length, per segment
+    bool close_ends[kLanes] = {};
+    bool any_close = false;
+    for (int k = 0; k < n; ++k) {
+      const double dx = x[k + 1] - x[k];
+      // segment()'s test, as written there (a NaN end is visible)
+      const bool visible = !(double(std::max(value[k], value[k + 1])) <= clear_up_to_);
+      close_ends[k] = visible && std::abs(dx) < 1e-3;
+      any_close |= close_ends[k];
+      const Row d = (at[k + 1] - at[k]) * (1.0 / (dx * dv_));  // tau, ctau
+      const double tau = d[0];
+      extinction[k] = visible ? float(std::max(0.0, tau) * length[k]) : 0.0f;
+      color[k] = visible && tau > 1e-12 ? Vec3f(Vec3d(d[1], d[2], d[3]) * (1.0 / tau)) : Vec3f(0.0f);
+    }
+    opacities(extinction, alpha);
+    for (int k = 0; any_close && k < n; ++k)
+      if (close_ends[k]) segment(value[k], value[k + 1], length[k], color[k], alpha[k]);
+  }
+
   /// @brief 1 - exp(-x) for x >= 0, in float (alpha is stored as one): below 1/8, where the
   /// difference would cancel, the series to x^5 (truncation below 2^-24 of the result); above,
-  /// 1 - expf(-x), within about 2^-21 of it (glibc's expm1f costs three times as much).
+  /// 1 - exp(-x) by exp_negative(), within about 2^-21 of it (glibc's expm1f costs three times
+  /// as much, and neither has a form in lanes that gives the same results).
   static float opacity(float x) {
-    if (x < 0.125f) return x * (1 - x * (0.5f - x * (1.0f / 6 - x * (1.0f / 24 - x * (1.0f / 120)))));
-    return 1 - std::exp(-x);
+    if (x < 0.125f) return opacity_series(x);
+    return 1 - exp_negative(x);
+  }
+  /// @brief opacity() of 8 values side by side, with the same results.
+  static void opacities(const float (&x)[8], float (&out)[8]) {
+    Floats8 v;
+    std::memcpy(&v, x, sizeof v);
+    const Floats8 series = opacity_series(v), exp = 1.0f - exp_negative(v);
+    const Floats8 o = v < (Floats8{} + 0.125f) ? series : exp;
+    std::memcpy(out, &o, sizeof o);
   }
 
  private:
+  using Floats8 = float __attribute__((vector_size(32)));
+  using Ints8 = int32_t __attribute__((vector_size(32)));
+  /// The series of 1 - exp(-x) to x^5 (F: a float, or floats in lanes).
+  template <typename F>
+  static F opacity_series(F x) {
+    return x * (1.0f - x * (0.5f - x * (1.0f / 6 - x * (1.0f / 24 - x * (1.0f / 120)))));
+  }
+  /// exp(-x) for x >= 0 (Cody and Waite's reduction to 2^n exp(r), |r| <= ln 2 / 2, and a
+  /// degree-7 polynomial for exp(r), as in Moshier's Cephes expf): within 2 ulp. F: a float,
+  /// or floats in lanes, with the same operations in each, so the same results.
+  template <typename F>
+  static F exp_negative(F x) {
+    const F cap = F{} + 87.0f;  // 2^n stays a normal float; exp(-87) is below float's epsilon
+    x = x < cap ? x : cap;
+    const F round = F{} + 12582912.0f;  // 1.5 * 2^23: adding and subtracting it rounds to a whole number
+    const F n = (x * -1.44269504088896341f + round) - round;
+    const F r = (-x - n * 0.693359375f) - n * -2.12194440e-4f;  // ln 2 in two parts: n ln 2 exactly
+    F p = F{} + 1.9875691500e-4f;
+    p = p * r + 1.3981999507e-3f;
+    p = p * r + 8.3334519073e-3f;
+    p = p * r + 4.1665795894e-2f;
+    p = p * r + 1.6666665459e-1f;
+    p = p * r + 5.0000001201e-1f;
+    return (p * (r * r) + r + 1.0f) * exp2_whole(n);
+  }
+  /// 2^n for a whole n in [-126, 0], from its bits.
+  static float exp2_whole(float n) { return std::bit_cast<float>((int32_t(n) + 127) << 23); }
+  static Floats8 exp2_whole(Floats8 n) { return (Floats8)((__builtin_convertvector(n, Ints8) + 127) << 23); }
+
+  /// integral()'s two rows, side by side in one vector (tau, then ctau).
+  using Row = double __attribute__((vector_size(32)));
+  /// integral() at x, with the same arithmetic, without a branch: the position clamped into
+  /// the table, plus the end's constant extinction beyond it (times 0 inside).
+  Row integral_row(double x) const {
+    const double inside = std::clamp(x, 0.0, double(last_));
+    const int64_t i = int64_t(inside);
+    const double f = inside - double(i);
+    Row a, b;
+    std::memcpy(&a, &integral_[size_t(i)], sizeof a);
+    std::memcpy(&b, &integral_[size_t(i) + 1], sizeof b);
+    const double td = end_slope_[x > 0].tau * ((x - inside) * dv_);
+    const Vec3d& c = end_slope_[x > 0].ctau;
+    return a + (b - a) * f + Row{td, c.x * td, c.y * td, c.z * td};
+  }
+
   struct Entry {
     Vec3d color;
     double tau;
@@ -102,6 +198,7 @@ class PreintegratedTf {
     double tau;  // of extinction
     Vec3d ctau;  // of colour * extinction
   };
+  static_assert(sizeof(Integral) == 4 * sizeof(double), "integral_row() reads an Integral as 4 doubles");
   /// The running integrals at table position x, continued past either end with that end's
   /// constant extinction and colour.
   /// (Indices are signed and the last position kept: size_t conversions and the vectors'
@@ -133,8 +230,10 @@ class PreintegratedTf {
   double dv_ = 0;  // value per table entry
   double clear_up_to_ = -kInfinity;  // a segment whose values all lie at or below this is transparent
   int64_t last_ = 0;                  // the last table position
-  std::vector<Integral> integral_;
+  std::vector<Integral> integral_;  // last_ + 2 rows: the last repeated
   std::vector<Entry> point_;
+  // The extinction and colour (an Integral's fields) past the lower end [0] and the upper [1].
+  Integral end_slope_[2] = {};
 };
 
 }  // namespace brickyard::gigavoxels

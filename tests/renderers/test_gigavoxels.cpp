@@ -26,6 +26,7 @@
 #include "renderers/common/scene.h"
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/cell_groups.h"
+#include "renderers/gigavoxels/corner_lanes.h"
 #include "renderers/gigavoxels/face_lighting.h"
 #include "renderers/gigavoxels/field_bounds.h"
 #include "renderers/gigavoxels/node_tree.h"
@@ -324,6 +325,87 @@ TEST(GigaVoxelsPreintegratedTf, OpacityIsOneMinusExpInFloatAcrossTheSeriesBounda
     ASSERT_LE(rel, x < 0.125f ? 0x1p-22 : 0x1p-20) << "x = " << x;
   }
   std::cout << "[ measured ] opacity(): worst relative error " << worst_series << " below 1/8, " << worst_exp << " above\n";
+}
+
+TEST(GigaVoxelsPreintegratedTf, SegmentsSideBySideAreSegmentsOneByOne) {
+  // Runs of 1 to 8 segments: values inside the points, outside them on either side, below the
+  // last transparent entry, equal neighbours (the midpoint's extinction, left to segment()),
+  // neighbours closer than a thousandth of a table entry, and NaN and infinite values.
+  const TransferFunction tf({{0.2, {0.1f, 0.2f, 0.9f}, 0.0f}, {0.5, {0.2f, 0.9f, 0.3f}, 0.4f}, {1.0, {1.0f, 0.3f, 0.2f}, 0.7f}});
+  const gigavoxels::PreintegratedTf pre(tf);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> value(-0.2f, 1.2f);
+  std::uniform_real_distribution<double> length(0.01, 6.0);
+  const float specials[] = {0.2f, 1.0f, 0.0f, -5.0f, 7.0f, std::numeric_limits<float>::infinity(), std::nanf("")};
+  int close = 0, clear = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    float values[9];
+    double lengths[8];
+    for (int k = 0; k < 9; ++k) {
+      values[k] = value(rng);
+      if (k > 0 && trial % 3 == 0 && k % 2 == 0) values[k] = values[k - 1];                // equal
+      if (k > 0 && trial % 5 == 0 && k % 3 == 0) values[k] = values[k - 1] + 1e-8f;        // close
+      if (trial % 11 == 0 && k % 4 == 1) values[k] = specials[size_t(trial / 11 + k) % 7];  // special
+      if (trial % 7 == 0) values[k] = 0.15f * values[k];                                  // clear
+    }
+    for (double& l : lengths) l = length(rng);
+    const int n = 1 + trial % 8;
+    Vec3f color[8];
+    float alpha[8];
+    pre.segments<8>(values, lengths, n, color, alpha);
+    for (int k = 0; k < n; ++k) {
+      Vec3f want_color;
+      float want_alpha;
+      pre.segment(values[k], values[k + 1], lengths[k], want_color, want_alpha);
+      const std::string what = fmt::format("trial {} segment {}: {} to {} over {}", trial, k, values[k], values[k + 1], lengths[k]);
+      ASSERT_EQ(alpha[k], want_alpha) << what;
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(color[k][c], want_color[c]) << what << " channel " << c;
+      close += values[k] == values[k + 1] && want_alpha > 0;
+      clear += want_alpha == 0;
+    }
+  }
+  EXPECT_GT(close, 50);
+  EXPECT_GT(clear, 500);
+}
+
+TEST(GigaVoxelsPreintegratedTf, OpacitiesSideBySideAreOpacityOneByOne) {
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> exponent(-30.0f, 8.0f);
+  for (int trial = 0; trial < 2000; ++trial) {
+    float x[8], got[8];
+    for (float& v : x) v = std::exp2(exponent(rng));
+    if (trial == 0) std::copy_n(std::begin({0.0f, 0.125f, 0.12499999f, 87.0f, 88.0f, 1e30f, 1e-40f, 0.5f}), 8, x);
+    gigavoxels::PreintegratedTf::opacities(x, got);
+    for (int k = 0; k < 8; ++k) ASSERT_EQ(got[k], gigavoxels::PreintegratedTf::opacity(x[k])) << "x = " << x[k];
+  }
+}
+
+TEST(GigaVoxelsCornerLanes, CornersOfEightCellsAreTheirVoxels) {
+  // Gathers (16-bit and float voxels) and single loads (8-bit) against the brick's own voxels,
+  // for cells anywhere in it, the last cell included (its reads end at the brick's last voxel).
+  const int32_t e = 10;
+  const auto check = [&](auto zero) {
+    using Voxel = decltype(zero);
+    std::vector<Voxel> brick(size_t(e * e * e));
+    for (size_t i = 0; i < brick.size(); ++i) brick[i] = Voxel((i * 7919) % 251);
+    std::mt19937 rng(1);
+    std::uniform_int_distribution<int32_t> coordinate(0, e - 2);
+    for (int trial = 0; trial < 200; ++trial) {
+      int32_t offset[8];
+      for (int32_t& o : offset) o = (coordinate(rng) * e + coordinate(rng)) * e + coordinate(rng);
+      if (trial == 0) offset[7] = ((e - 2) * e + (e - 2)) * e + (e - 2);
+      float corner[8][8];
+      gigavoxels::load_cell_corners(brick.data(), offset, e, corner);
+      for (int k = 0; k < 8; ++k)
+        for (int c = 0; c < 8; ++c) {
+          const int32_t at = offset[k] + (c & 1) + ((c >> 1) & 1) * e + (c >> 2) * e * e;
+          ASSERT_EQ(corner[c][k], float(brick[size_t(at)])) << "cell " << k << " corner " << c << " voxel size " << sizeof(Voxel);
+        }
+    }
+  };
+  check(uint8_t{});
+  check(uint16_t{});
+  check(float{});
 }
 
 TEST(GigaVoxelsShading, LightingOfGradientsSideBySideIsLightingOfGradientOneByOne) {
