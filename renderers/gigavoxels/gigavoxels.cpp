@@ -734,7 +734,7 @@ class GigaVoxelsRenderer final : public Renderer {
       const int64_t e = r.m_ + 2;
       const float top = float(e - 1);
       for (int a = 0; a < 3; ++a) {
-        const float x = std::clamp(l[a], 0.0f, top);
+        const float x = l[a] > 0 ? std::min(l[a], top) : 0.0f;  // NaN: 0 (std::clamp keeps it)
         cell[a] = std::min<int64_t>(int64_t(x), e - 2);
         u[a] = x - float(cell[a]);
       }
@@ -1458,11 +1458,11 @@ class GigaVoxelsRenderer final : public Renderer {
     /// How many samples sample_run takes side by side: AVX2's floats.
     static constexpr int kRunLanes = 8;
     enum class Run { none, advanced, finished };
-    /// march_dvr<true>'s samples from t on, up to kRunLanes of them, taken side by side: the
-    /// positions one by one (the cell group look, as march_dvr's), then the cells, values and
-    /// gradients and lighting of all of them in loops the compiler vectorises, the face weights
-    /// in vector extensions, the segments one by one, then the compositing in order. The same samples and arithmetic as one at a
-    /// time, but for the step: it stays dt across the run, where the adaptive step would grow
+    /// march_dvr<true>'s samples from t on, up to kRunLanes of them, taken side by side in
+    /// vector lanes (GCC's vector extension): positions and cell groups (then the looks at
+    /// them one by one, as march_dvr's), cells, gathered corners, values and gradients,
+    /// lighting, face weights, and segments (PreintegratedTf::segments); then the compositing
+    /// in order. The same samples and arithmetic as one at a time, but for the step: it stays dt across the run, where the adaptive step would grow
     /// it after each visible segment. The run ends before the node's exit (t_end) and before
     /// a sample whose cell group is clear (the leap is march_dvr's). Needs a segment open
     /// (s.have_prev). Returns none when the sample at t is not the run's: t's group is clear.
@@ -1524,7 +1524,7 @@ class GigaVoxelsRenderer final : public Renderer {
       for (int a = 2; a >= 0; --a) {
         Floats x;
         std::memcpy(&x, lf[a], sizeof x);
-        x = x > 0.0f ? (x < cell_top ? x : cell_top) : Floats{};  // std::clamp (NaN: 0)
+        x = x > 0.0f ? (x < cell_top ? x : cell_top) : Floats{};  // brick_cell's clamp (NaN: 0)
         Ints c = __builtin_convertvector(x, Ints);
         c = c < last_cell ? c : last_cell;
         uf[a] = x - __builtin_convertvector(c, Floats);

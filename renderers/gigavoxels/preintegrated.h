@@ -141,14 +141,14 @@ class PreintegratedTf {
   using Ints8 = int32_t __attribute__((vector_size(32)));
   /// The series of 1 - exp(-x) to x^5 (F: a float, or floats in lanes).
   template <typename F>
-  static F opacity_series(F x) {
+  [[gnu::always_inline]] static F opacity_series(F x) {
     return x * (1.0f - x * (0.5f - x * (1.0f / 6 - x * (1.0f / 24 - x * (1.0f / 120)))));
   }
   /// exp(-x) for x >= 0 (Cody and Waite's reduction to 2^n exp(r), |r| <= ln 2 / 2, and a
   /// degree-7 polynomial for exp(r), as in Moshier's Cephes expf): within 2 ulp. F: a float,
   /// or floats in lanes, with the same operations in each, so the same results.
   template <typename F>
-  static F exp_negative(F x) {
+  [[gnu::always_inline]] static F exp_negative(F x) {
     const F cap = F{} + 87.0f;  // 2^n stays a normal float; exp(-87) is below float's epsilon
     x = x < cap ? x : cap;
     const F round = F{} + 12582912.0f;  // 1.5 * 2^23: adding and subtracting it rounds to a whole number
@@ -163,14 +163,14 @@ class PreintegratedTf {
     return (p * (r * r) + r + 1.0f) * exp2_whole(n);
   }
   /// 2^n for a whole n in [-126, 0], from its bits.
-  static float exp2_whole(float n) { return std::bit_cast<float>((int32_t(n) + 127) << 23); }
-  static Floats8 exp2_whole(Floats8 n) { return (Floats8)((__builtin_convertvector(n, Ints8) + 127) << 23); }
+  [[gnu::always_inline]] static float exp2_whole(float n) { return std::bit_cast<float>((int32_t(n) + 127) << 23); }
+  [[gnu::always_inline]] static Floats8 exp2_whole(Floats8 n) { return (Floats8)((__builtin_convertvector(n, Ints8) + 127) << 23); }
 
   /// integral()'s two rows, side by side in one vector (tau, then ctau).
   using Row = double __attribute__((vector_size(32)));
   /// integral() at x, with the same arithmetic, without a branch: the position clamped into
   /// the table, plus the end's constant extinction beyond it (times 0 inside).
-  Row integral_row(double x) const {
+  [[gnu::always_inline]] Row integral_row(double x) const {
     const double inside = std::clamp(x, 0.0, double(last_));
     const int64_t i = int64_t(inside);
     const double f = inside - double(i);
@@ -204,16 +204,10 @@ class PreintegratedTf {
   /// (Indices are signed and the last position kept: size_t conversions and the vectors'
   /// sizes cost a DVR sample 15 instructions and three branches.)
   Integral integral(double x) const {
-    if (!(x > 0 && x < double(last_))) {  // x is never NaN (position())
-      const int64_t i = x > 0 ? last_ : 0;
-      const double d = (x - double(i)) * dv_;
-      const Entry& p = point_[size_t(i)];
-      return {integral_[size_t(i)].tau + p.tau * d, integral_[size_t(i)].ctau + p.color * (p.tau * d)};
-    }
-    const int64_t i = int64_t(x);
-    const double f = x - double(i);
-    const Integral* a = integral_.data() + i;
-    return {a[0].tau + (a[1].tau - a[0].tau) * f, a[0].ctau + (a[1].ctau - a[0].ctau) * f};
+    // integral_row()'s, so that segment() and segments() agree to the last bit (FMA
+    // contraction fuses one form of the end's term and not another).
+    const Row v = integral_row(x);
+    return {v[0], Vec3d(v[1], v[2], v[3])};
   }
   Entry point_at(double x) const {
     x = std::clamp(x, 0.0, double(last_));
