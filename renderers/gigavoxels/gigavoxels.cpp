@@ -891,11 +891,9 @@ class GigaVoxelsRenderer final : public Renderer {
     }
     /// The cell group holding brick coordinates l (clamped into the brick).
     int group_of(const double l[3], int g[3]) const {
-      const double top = double(r.m_ + 1);
-      // Through int, not unsigned: a double's conversion to unsigned is a branchy sequence
-      // before AVX-512; unsigned division by the power of two is a shift. NaN clamps to 0.
-      // (sample_run computes the same in lanes.)
-      for (int a = 0; a < 3; ++a) g[a] = int(unsigned(int(l[a] > 0 ? std::min(l[a], top) : 0.0)) / unsigned(kCellGroup));
+      // The voxel clamped into the brick (NaN: 0), then its group by a shift (unsigned division
+      // by the power of two). sample_run computes the same in lanes.
+      for (int a = 0; a < 3; ++a) g[a] = int(unsigned(child_index(l[a], r.m_ + 2)) / unsigned(kCellGroup));
       return (g[2] * r.groups_ + g[1]) * r.groups_ + g[0];
     }
     /// Where the ray leaves (or enters) the cube of groups centred on group g that its distance

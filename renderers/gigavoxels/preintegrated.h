@@ -65,7 +65,7 @@ class PreintegratedTf {
   /// @brief The segment's opacity and colour (not premultiplied) for a value going linearly
   /// from front to back over length_voxels finest voxels.
   void segment(float front, float back, double length_voxels, Vec3f& color, float& alpha) const {
-    if (double(std::max(front, back)) <= clear_up_to_) {  // most of a sparse volume: no table, no exp
+    if (clear(front, back)) {  // most of a sparse volume: no table, no exp
       color = Vec3f(0.0f), alpha = 0;
       return;
     }
@@ -97,16 +97,14 @@ class PreintegratedTf {
                 float (&alpha)[kLanes]) const {
     static_assert(kLanes == 8, "opacities in lanes are 8 floats (AVX2)");
     double x[kLanes + 1];
-    for (int k = 0; k <= kLanes; ++k) x[k] = position(value[k]);
     Row at[kLanes + 1];
-    for (int k = 0; k <= n; ++k) at[k] = integral_row(x[k]);
+    for (int k = 0; k <= n; ++k) x[k] = position(value[k]), at[k] = integral_row(x[k]);
     float extinction[kLanes] = {};  // tau times the length, per segment
     bool close_ends[kLanes] = {};
     bool any_close = false;
     for (int k = 0; k < n; ++k) {
       const double dx = x[k + 1] - x[k];
-      // segment()'s test, as written there (a NaN end is visible)
-      const bool visible = !(double(std::max(value[k], value[k + 1])) <= clear_up_to_);
+      const bool visible = !clear(value[k], value[k + 1]);
       close_ends[k] = visible && std::abs(dx) < 1e-3;
       any_close |= close_ends[k];
       const Row d = (at[k + 1] - at[k]) * (1.0 / (dx * dv_));  // tau, ctau
@@ -166,10 +164,14 @@ class PreintegratedTf {
   [[gnu::always_inline]] static float exp2_whole(float n) { return std::bit_cast<float>((int32_t(n) + 127) << 23); }
   [[gnu::always_inline]] static Floats8 exp2_whole(Floats8 n) { return (Floats8)((__builtin_convertvector(n, Ints8) + 127) << 23); }
 
-  /// integral()'s two rows, side by side in one vector (tau, then ctau).
+  /// Whether a segment from front to back is transparent (a NaN end is not).
+  bool clear(float front, float back) const { return double(std::max(front, back)) <= clear_up_to_; }
+
+  /// An Integral's fields side by side in one vector (tau, then ctau).
   using Row = double __attribute__((vector_size(32)));
-  /// integral() at x, with the same arithmetic, without a branch: the position clamped into
-  /// the table, plus the end's constant extinction beyond it (times 0 inside).
+  /// The running integrals at table position x without a branch: the position clamped into
+  /// the table, interpolated between its rows, plus the end's constant extinction beyond it
+  /// (times 0 inside).
   [[gnu::always_inline]] Row integral_row(double x) const {
     const double inside = std::clamp(x, 0.0, double(last_));
     const int64_t i = int64_t(inside);
@@ -200,12 +202,9 @@ class PreintegratedTf {
   };
   static_assert(sizeof(Integral) == 4 * sizeof(double), "integral_row() reads an Integral as 4 doubles");
   /// The running integrals at table position x, continued past either end with that end's
-  /// constant extinction and colour.
-  /// (Indices are signed and the last position kept: size_t conversions and the vectors'
-  /// sizes cost a DVR sample 15 instructions and three branches.)
+  /// constant extinction and colour: integral_row()'s, so that segment() and segments() agree
+  /// to the last bit (FMA contraction fused one form of the end's term and not another).
   Integral integral(double x) const {
-    // integral_row()'s, so that segment() and segments() agree to the last bit (FMA
-    // contraction fuses one form of the end's term and not another).
     const Row v = integral_row(x);
     return {v[0], Vec3d(v[1], v[2], v[3])};
   }
