@@ -22,6 +22,7 @@
 // requests within the per-frame budgets.
 
 #include <algorithm>
+#include <atomic>
 #include <cassert>
 #include <cmath>
 #include <limits>
@@ -356,6 +357,7 @@ class GigaVoxelsRenderer final : public Renderer {
     failed_before_ = tree_.counters().failed_allocations;
     compaction_ = {};
     loader_seconds_ = 0;
+    samples_in_runs_ = 0;
     tree_.begin_feedback(frame_);
     if (!uses_ || uses_->width() != setup.width || uses_->height() != setup.height)
       uses_ = std::make_unique<gigavoxels::UseBuffer>(setup.width, setup.height, p_.slots_per_pixel);
@@ -375,6 +377,7 @@ class GigaVoxelsRenderer final : public Renderer {
         if (s.status == RayState::done) continue;
         t.pixel(x, y, s, out);
       }
+    samples_in_runs_.fetch_add(t.samples_in_runs, std::memory_order_relaxed);
   }
 
   void end_frame(const FrameSetup& setup, const FrameBuffers& out) override {
@@ -415,6 +418,7 @@ class GigaVoxelsRenderer final : public Renderer {
                      {"brick_slots", double(tree_.brick_capacity())},
                      {"brick_pool_bytes", double(uint64_t(tree_.brick_capacity()) * slot_bytes(m_, !brick_differences_.empty()))},
                      {"bricks_used", double(tree_.bricks_used_this_frame())},
+                     {"samples_in_runs", double(samples_in_runs_.load(std::memory_order_relaxed))},
                      {"failed_allocations", double(tree_.counters().failed_allocations - failed_before_)},
                      {"loader_ms", loader_seconds_ * 1e3}};
   }
@@ -720,6 +724,7 @@ class GigaVoxelsRenderer final : public Renderer {
     // (or none), lit by a light fixed along rays (or unlit).
     const bool runs;
     Vec3d ray_light{0.0}, ray_half{0.0};
+    uint64_t samples_in_runs = 0;  // of counters.samples
 
     Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
         : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
@@ -1375,11 +1380,18 @@ class GigaVoxelsRenderer final : public Renderer {
         double l[3];
         if constexpr (kOneLevel) {
           if (runs && s.have_prev && !last) {
-            const Run run = sample_run(fine, s, px, t, dt, t_end, unit_per_t, stop, visible_group, prev_at, prev_lattice,
-                                       face_lighting, ray);
+            const Run run = sample_run(fine, s, px, t, dt, t_end, t_face, unit_per_t, stop, visible_group, prev_at,
+                                       prev_lattice, face_lighting, ray);
             if (run == Run::finished) {
               finished = true;
               break;
+            }
+            if (run == Run::exited) break;  // t is past the exit, as after the exit sample below
+            if (run == Run::leapt) {  // as a leap below, whose first sample the run took
+              ++counters.samples;
+              prev_lattice = nullptr;
+              s.start_segment(sample(bl, t - dt, nullptr), t - dt);
+              continue;
             }
             if (run == Run::advanced) continue;
           }
@@ -1455,18 +1467,24 @@ class GigaVoxelsRenderer final : public Renderer {
 
     /// How many samples sample_run takes side by side: AVX2's floats.
     static constexpr int kRunLanes = 8;
-    enum class Run { none, advanced, finished };
+    /// How a run ended: none (t's group is clear: no run), advanced (t: the next sample
+    /// position), finished (the ray is), exited (its last sample was the node's exit: t is past
+    /// it), leapt (its last sample started a leap over clear groups: t is the first position
+    /// past them, whose last position t - dt starts the next segment).
+    enum class Run { none, advanced, finished, exited, leapt };
     /// march_dvr<true>'s samples from t on, up to kRunLanes of them, taken side by side in
     /// vector lanes (GCC's vector extension): positions and cell groups (then the looks at
     /// them one by one, as march_dvr's), cells, gathered corners, values and gradients,
     /// lighting, face weights, and segments (PreintegratedTf::segments); then the compositing
-    /// in order. The same samples and arithmetic as one at a time, but for the step: it stays dt across the run, where the adaptive step would grow
-    /// it after each visible segment. The run ends before the node's exit (t_end) and before
-    /// a sample whose cell group is clear (the leap is march_dvr's). Needs a segment open
-    /// (s.have_prev). Returns none when the sample at t is not the run's: t's group is clear.
-    Run sample_run(const PathNode& b, RayState& s, PixelResult& px, double& t, double dt, double t_end, double unit_per_t,
-                   double stop, int& visible_group, CellPoint& prev_at, const PathNode*& prev_lattice, bool face_lighting,
-                   const PrimaryRay& ray) {
+    /// in order. The same samples and arithmetic as one at a time, but for the step: it stays
+    /// dt across the run, where the adaptive step would grow it after each visible segment.
+    /// A run ends at the node's exit (t_end), whose sample at t_face (the exit within the ray)
+    /// is its last, as one at a time takes it; and at a sample whose cell group is clear,
+    /// which is its last when a leap starts there (march_dvr takes the leap's last position)
+    /// and is left out otherwise. Needs a segment open (s.have_prev).
+    Run sample_run(const PathNode& b, RayState& s, PixelResult& px, double& t, double dt, double t_end, double t_face,
+                   double unit_per_t, double stop, int& visible_group, CellPoint& prev_at, const PathNode*& prev_lattice,
+                   bool face_lighting, const PrimaryRay& ray) {
       constexpr int L = kRunLanes;
       // GCC's vector extension: AVX2 where the target has it (x86-64-v3 is the build's floor).
       // GCC 12's loop vectoriser left most of these lanes scalar, with their arrays spilled.
@@ -1483,6 +1501,15 @@ class GigaVoxelsRenderer final : public Renderer {
       double tk[L];
       tk[0] = t;
       for (int k = 1; k < L; ++k) tk[k] = tk[k - 1] + dt;
+      // The first position at or past the node's exit is the exit itself, when the sample before
+      // lies before it (march_dvr's exit sample: t_end is a hair past t_face). The lanes after it
+      // are not used.
+      int exit_lane = L;
+      for (int k = 1; k < L; ++k)
+        if (!(tk[k] < t_end)) {
+          if (tk[k - 1] < t_face) exit_lane = k, tk[k] = t_face;
+          break;
+        }
       const double m = double(r.m_);
       const Doubles group_top = Doubles{} + double(r.m_ + 1);
       float lf[3][L];
@@ -1502,11 +1529,33 @@ class GigaVoxelsRenderer final : public Renderer {
         std::memcpy(&group[h], &index, sizeof index);
       }
       int n = 0;
-      for (; n < L && tk[n] < t_end; ++n)
+      Run ending = Run::advanced;
+      std::optional<double> t_after;  // where the march goes on, when not one step past the run's last sample
+      for (; n < L; ++n) {
+        if (n == exit_lane) {  // its look may leap nothing (march_dvr's leap of 0 steps)
+          ending = Run::exited;
+          ++n;
+          break;
+        }
+        if (!(tk[n] < t_end)) break;  // past the exit, with no exit sample
         if (r.p_.skip_cells && group[n] != visible_group) {
-          if (b.group_distances[group[n]] != 0) break;
+          if (const uint8_t distance = b.group_distances[group[n]]; distance != 0) {
+            if (n == 0) return Run::none;
+            // march_dvr's leap from here: a leap of one step is a plain step, which ends the run.
+            double l[3];
+            int g[3];
+            brick_coordinates(b, tk[n], l);
+            group_of(l, g);
+            const double t_leave = cube_crossing(b, g, distance, true);
+            const double steps = std::ceil((std::max(std::min(t_leave, t_face), tk[n]) - tk[n]) / dt);
+            ending = steps > 1 ? Run::leapt : Run::advanced;
+            t_after = tk[n] + std::max(steps, 1.0) * dt;
+            ++n;
+            break;
+          }
           visible_group = group[n];
         }
+      }
       if (n == 0) return Run::none;
       // Cells and values: brick_cell and sample_brick_at. Point 0 is the previous sample (face
       // weights), the run's samples are points 1..L. Lanes past n sample past the run, inside
@@ -1628,10 +1677,12 @@ class GigaVoxelsRenderer final : public Renderer {
           // The samples past it were not the ray's. The state keeps the run's start: a
           // finished ray reads only its colour and opacity.
           counters.samples += uint64_t(k + 1);
+          samples_in_runs += uint64_t(k + 1);
           return Run::finished;
         }
       }
       counters.samples += uint64_t(n);
+      samples_in_runs += uint64_t(n);
       if (r.p_.adaptive_step > 1) s.step_scale = adaptive_step_scale(s.alpha);
       const int last = n - 1;
       s.prev_value = value[n], s.prev_t = tk[last], s.have_prev = true;
@@ -1640,8 +1691,8 @@ class GigaVoxelsRenderer final : public Renderer {
       if (s.have_prev_lighting) s.prev_lighting = {diffuse[last], specular[last]};
       for (int a = 0; a < 3; ++a) prev_at.cell[a] = cell[a][n], prev_at.u[a] = u[a][n];
       prev_lattice = face_lighting ? &b : nullptr;
-      t = tk[last] + dt;
-      return Run::advanced;
+      t = t_after ? *t_after : tk[last] + dt;
+      return ending;
     }
 
     /// The first isosurface whose value going from value a to value b crosses (or lands on);
@@ -1932,6 +1983,7 @@ class GigaVoxelsRenderer final : public Renderer {
   uint64_t passes_ = 0, interrupted_ = 0, frame_subdivisions_ = 0, frame_uploads_ = 0, frame_requests_ = 0, frame_uses_ = 0;
   uint64_t last_pass_progress_ = 0, last_pass_requests_ = 0;
   uint64_t produced_before_ = 0, loaded_before_ = 0, failed_before_ = 0;
+  mutable std::atomic<uint64_t> samples_in_runs_{0};  // this frame's samples that sample_run took, added once per tile
   int stalled_frames_ = 0;
   int frames_loading_ = 0;  // first passes in a row that only waited on loads
   double loader_seconds_ = 0;
