@@ -91,6 +91,7 @@ struct GigaVoxelsParams {
   double adaptive_step = 8;    // DVR: the most a step grows where a sample counts less (1: fixed)
   bool face_lighting = true;   // DVR: a segment's end lightings weighted by the cell faces it crosses
   bool sample_runs = true;     // DVR at one level: runs of samples taken side by side (sample_run)
+  bool termination_fill = true;  // DVR: a terminated ray's light left takes its last segment's colour
 };
 
 using gigavoxels::CellPoint;
@@ -658,6 +659,7 @@ class GigaVoxelsRenderer final : public Renderer {
     bool have_prev_gradient = false, have_prev_lighting = false;
     Vec3d prev_gradient{0.0};
     ShadingModel::Lighting prev_lighting;
+    Vec3f last_color{0.0f};  // DVR: the last segment composited, shaded (termination_fill)
 
     /// The next segment starts at `at` with `value`, where no gradient was taken.
     void start_segment(float value, double at) {
@@ -1313,8 +1315,18 @@ class GigaVoxelsRenderer final : public Renderer {
         if (hit_t == kInf) return;
         finish_iso(ray, hit_t, px);
       } else {
-        px.color = Vec3f(s.accum + Vec3d(r.scene_.background) * (1 - s.alpha));
-        px.alpha = float(s.alpha);
+        if (r.p_.termination_fill && s.alpha >= stop && s.alpha > 0) {
+          // Terminated: the light left would have met more of the medium than the background.
+          // The last segment's colour is its best guess (the reference's image and raymarch's
+          // converge as the termination opacity goes to 1; this estimate converges faster:
+          // its error is the light left times how far the colour drifts behind, not times all
+          // of it).
+          px.color = Vec3f(s.accum + Vec3d(s.last_color) * (1 - s.alpha));
+          px.alpha = 1;
+        } else {
+          px.color = Vec3f(s.accum + Vec3d(r.scene_.background) * (1 - s.alpha));
+          px.alpha = float(s.alpha);
+        }
       }
     }
 
@@ -1664,6 +1676,7 @@ class GigaVoxelsRenderer final : public Renderer {
             light = front_light.mix(here, weight[k]);
           }
           const Vec3f c = r.shading_.apply(color[k], lit ? light : none);
+          s.last_color = c;
           const double a = alpha[k];
           s.accum += Vec3d(c) * ((1 - s.alpha) * a);
           s.alpha += (1 - s.alpha) * a;
@@ -1902,6 +1915,7 @@ class GigaVoxelsRenderer final : public Renderer {
     [[gnu::always_inline]] void composite(RayState& s, PixelResult& px, Vec3f c, double a, double t, const ShadingModel::Lighting& light,
                    const Vec3d& gradient, const PrimaryRay& ray) {
       c = r.shading_.apply(c, light);
+      s.last_color = c;
       s.accum += Vec3d(c) * ((1 - s.alpha) * a);
       s.alpha += (1 - s.alpha) * a;
       if (r.p_.adaptive_step > 1) s.step_scale = adaptive_step_scale(s.alpha);
@@ -2030,6 +2044,9 @@ BackendEntry gigavoxels_backend() {
       {"sample_runs", 1, 0, 1, "DVR at one level: 1 takes runs of up to 8 samples along a ray side by side (SIMD), the "
                                "adaptive step fixed for a run (not under a point light, nor with difference normals); 0: "
                                "one sample at a time"},
+      {"termination_fill", 1, 0, 1, "DVR: 1 gives the light left to a ray that early termination stops (quality."
+                                    "termination_opacity) its last segment's colour, as if the medium went on alike; "
+                                    "0: the background's, as if it ended there"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
@@ -2066,6 +2083,7 @@ BackendEntry gigavoxels_backend() {
     gp.adaptive_step = p["adaptive_step"];
     gp.face_lighting = p["face_lighting"] != 0;
     gp.sample_runs = p["sample_runs"] != 0;
+    gp.termination_fill = p["termination_fill"] != 0;
     return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       using Stored = decltype(stored);
       std::unique_ptr<Source> source;
