@@ -22,11 +22,19 @@ struct CellPoint {
   float u[3] = {};
 };
 
-/// @brief The weight of the front end's lighting for the segment from a to b (points of one
-/// brick's cells): the fraction of the segment before the first cell face it crosses plus half
-/// the fraction between its first and last. 1/2 when it crosses none; always in [0, 1].
-inline float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
-  float first = 1, last = 0;  // the first and last faces crossed, as fractions of the segment
+/// @brief The first and last cell faces a segment crosses, as fractions of it, each in [0, 1]
+/// with first <= last; first = 1 and last = 0 when it crosses none. Between them lie the cells
+/// where the ray takes no sample; first < last when there are any (two faces crossed or more).
+struct FaceCrossings {
+  float first = 1, last = 0;
+  /// The fraction of the segment where the cells between are, and its middle.
+  bool has_middle() const { return first < last; }
+  float middle() const { return 0.5f * (first + last); }
+};
+
+/// @brief FaceCrossings of the segment from a to b (points of one brick's cells).
+inline FaceCrossings face_crossings(const CellPoint& a, const CellPoint& b) {
+  float first = 1, last = 0;
   for (int k = 0; k < 3; ++k) {
     const int32_t c0 = a.cell[k], c1 = b.cell[k];
     if (c0 == c1) continue;
@@ -36,14 +44,25 @@ inline float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
     first = std::min(first, (first_face - l0) * inv_span);
     last = std::max(last, (last_face - l0) * inv_span);
   }
-  return std::clamp(0.5f * (first + last), 0.0f, 1.0f);  // a reciprocal's rounding can pass 1
+  if (last < first) return {};  // none crossed
+  // A reciprocal's rounding can pass 0 or 1.
+  first = std::clamp(first, 0.0f, 1.0f);
+  return {first, std::clamp(last, first, 1.0f)};
 }
 
-/// @brief front_lighting_weight() for the 8 segments from point k to point k + 1 of a run of 9
-/// points (cells and positions per axis, then point), side by side in 8-lane vectors (GCC's
-/// vector extension: AVX2 where the target has it; GCC 12 left the same loop scalar), with the
-/// same arithmetic, and so the same results.
-inline void front_lighting_weights(const int32_t (&cell)[3][9], const float (&u)[3][9], float (&weight)[8]) {
+/// @brief The weight of the front end's lighting for the segment from a to b (points of one
+/// brick's cells): the fraction of the segment before the first cell face it crosses plus half
+/// the fraction between its first and last. 1/2 when it crosses none; always in [0, 1].
+inline float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
+  const FaceCrossings f = face_crossings(a, b);
+  return f.has_middle() || f.first == f.last ? f.middle() : 0.5f;
+}
+
+/// @brief face_crossings() for the 8 segments from point k to point k + 1 of a run of 9 points
+/// (cells and positions per axis, then point), side by side in 8-lane vectors (GCC's vector
+/// extension: AVX2 where the target has it; GCC 12 left the same loop scalar), with the same
+/// arithmetic, and so the same results.
+inline void face_crossings(const int32_t (&cell)[3][9], const float (&u)[3][9], FaceCrossings (&crossings)[8]) {
   using Floats = float __attribute__((vector_size(32)));
   using Ints = int32_t __attribute__((vector_size(32)));
   Floats first = Floats{} + 1.0f, last = Floats{};
@@ -64,9 +83,22 @@ inline void front_lighting_weights(const int32_t (&cell)[3][9], const float (&u)
     first = same ? first : (to_first < first ? to_first : first);  // std::min
     last = same ? last : (last < to_last ? to_last : last);        // std::max
   }
-  Floats w = 0.5f * (first + last);
-  w = w < 0.0f ? Floats{} : (1.0f < w ? Floats{} + 1.0f : w);  // std::clamp
-  std::memcpy(weight, &w, sizeof w);
+  const Ints none = last < first;
+  first = first < 0.0f ? Floats{} : (1.0f < first ? Floats{} + 1.0f : first);  // std::clamp
+  last = last < first ? first : (1.0f < last ? Floats{} + 1.0f : last);
+  first = none ? Floats{} + 1.0f : first;
+  last = none ? Floats{} : last;
+  for (int k = 0; k < 8; ++k) crossings[k] = {first[k], last[k]};
+}
+
+/// @brief front_lighting_weight() for the 8 segments of a run of 9 points (face_crossings()).
+inline void front_lighting_weights(const int32_t (&cell)[3][9], const float (&u)[3][9], float (&weight)[8]) {
+  FaceCrossings crossings[8];
+  face_crossings(cell, u, crossings);
+  for (int k = 0; k < 8; ++k) {
+    const FaceCrossings& f = crossings[k];
+    weight[k] = f.has_middle() || f.first == f.last ? f.middle() : 0.5f;
+  }
 }
 
 }  // namespace brickyard::gigavoxels

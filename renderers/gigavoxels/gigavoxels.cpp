@@ -90,6 +90,7 @@ struct GigaVoxelsParams {
   int hidden_crossings = 5;    // iso: a step is searched for a crossing pair it may hide, down to 2^-this voxels (0: none)
   double adaptive_step = 8;    // DVR: the most a step grows where a sample counts less (1: fixed)
   bool face_lighting = true;   // DVR: a segment's end lightings weighted by the cell faces it crosses
+  bool middle_lighting = true; // and the cells between its first and last faces lit at their middle
   bool sample_runs = true;     // DVR at one level: runs of samples taken side by side (sample_run)
   bool termination_fill = true;  // DVR: a terminated ray's light left takes its last segment's colour
 };
@@ -1453,7 +1454,7 @@ class GigaVoxelsRenderer final : public Renderer {
           bool lit_here = false;
           if (s.have_prev) {
             lit_here = integrate(s, px, v, t, to_voxels(t - s.prev_t, unit_per_t), g, ray,
-                                 one_lattice && prev_lattice == bl.finer ? &prev_at : nullptr, &at);
+                                 one_lattice && prev_lattice == bl.finer ? &prev_at : nullptr, &at, bl.finer);
             if (s.alpha >= stop) {
               finished = true;
               break;
@@ -1653,9 +1654,20 @@ class GigaVoxelsRenderer final : public Renderer {
         }
       }
       float weight[L];
+      gigavoxels::FaceCrossings crossings[L];
+      bool middle[L] = {};  // lit between its first and last faces by the lighting at their middle
+      float middle_diffuse[L], middle_specular[L];
+      bool middle_normal[L];
       if (face_lighting) {
-        gigavoxels::front_lighting_weights(cell, u, weight);
-        if (prev_lattice != &b) weight[0] = 0.5f;
+        gigavoxels::face_crossings(cell, u, crossings);
+        if (prev_lattice != &b) crossings[0] = {};  // its front end lies in another lattice
+        bool any_middle = false;
+        for (int k = 0; k < L; ++k) {
+          weight[k] = front_weight(crossings[k]);
+          middle[k] = lit && r.p_.middle_lighting && k < n && alpha[k] > 0 && crossings[k].has_middle();
+          any_middle |= middle[k];
+        }
+        if (any_middle) lighting_between(b, cell, u, crossings, tk, s.prev_t, ray, middle_diffuse, middle_specular, middle_normal);
       } else {
         std::fill_n(weight, L, 0.5f);
       }
@@ -1673,7 +1685,12 @@ class GigaVoxelsRenderer final : public Renderer {
             if (k > 0 && !front_lit) counters.gradients += normal[k - 1];
             const ShadingModel::Lighting front_light =
                 k == 0 ? s.prev_lighting : ShadingModel::Lighting{diffuse[k - 1], specular[k - 1]};
-            light = front_light.mix(here, weight[k]);
+            if (middle[k]) {
+              counters.gradients += middle_normal[k];
+              light = across_faces(front_light, {middle_diffuse[k], middle_specular[k]}, here, crossings[k]);
+            } else {
+              light = front_light.mix(here, weight[k]);
+            }
           }
           const Vec3f c = r.shading_.apply(color[k], lit ? light : none);
           s.last_color = c;
@@ -1706,6 +1723,78 @@ class GigaVoxelsRenderer final : public Renderer {
       prev_lattice = face_lighting ? &b : nullptr;
       t = t_after ? *t_after : tk[last] + dt;
       return ending;
+    }
+
+    /// The lighting in the middle of the cells each segment of a run crosses between its first
+    /// and last faces (crossings), as integrate() takes it one at a time: its point in brick
+    /// coordinates from its ends' cells (points k and k + 1 of cell and u), then brick_cell,
+    /// the corners, the analytic gradient and lighting_of_gradients, side by side; lighting_at
+    /// where that cannot light it. Its gradient is counted where it is used.
+    [[gnu::always_inline]] void lighting_between(const PathNode& b, const int32_t (&cell)[3][kRunLanes + 1],
+                                                 const float (&u)[3][kRunLanes + 1],
+                                                 const gigavoxels::FaceCrossings (&crossings)[kRunLanes],
+                                                 const double (&tk)[kRunLanes], double prev_t, const PrimaryRay& ray,
+                                                 float (&diffuse)[kRunLanes], float (&specular)[kRunLanes],
+                                                 bool (&normal)[kRunLanes]) {
+      constexpr int L = kRunLanes, H = L / 2;
+      using Floats = float __attribute__((vector_size(32)));
+      using Ints = int32_t __attribute__((vector_size(32)));
+      using Doubles = double __attribute__((vector_size(32)));
+      using Floats4 = float __attribute__((vector_size(16)));
+      float fraction[L];
+      for (int k = 0; k < L; ++k) fraction[k] = crossings[k].middle();
+      Floats at;
+      std::memcpy(&at, fraction, sizeof at);
+      const int32_t e = r.m_ + 2;
+      const Floats cell_top = Floats{} + float(e - 1);
+      const Ints last_cell = Ints{} + (e - 2);
+      Floats uf[3];
+      Ints offset = {};
+      for (int a = 2; a >= 0; --a) {
+        Ints c0, c1;
+        Floats u0, u1;
+        std::memcpy(&c0, &cell[a][0], sizeof c0), std::memcpy(&c1, &cell[a][1], sizeof c1);
+        std::memcpy(&u0, &u[a][0], sizeof u0), std::memcpy(&u1, &u[a][1], sizeof u1);
+        const Floats l0 = __builtin_convertvector(c0, Floats) + u0, l1 = __builtin_convertvector(c1, Floats) + u1;
+        Floats x = l0 + at * (l1 - l0);
+        x = x > 0.0f ? (x < cell_top ? x : cell_top) : Floats{};  // brick_cell's clamp (NaN: 0)
+        Ints c = __builtin_convertvector(x, Ints);
+        c = c < last_cell ? c : last_cell;
+        uf[a] = x - __builtin_convertvector(c, Floats);
+        offset = offset * e + c;
+      }
+      int32_t offsets[L];
+      std::memcpy(offsets, &offset, sizeof offsets);
+      float corners[8][L];
+      gigavoxels::load_cell_corners(b.brick, offsets, e, corners);
+      Floats corner[8];
+      for (int i = 0; i < 8; ++i) std::memcpy(&corner[i], corners[i], sizeof corner[i]);
+      Vec3<Floats> g;
+      trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g);
+      const double to_unit = b.scale * double(r.m_);
+      double gradient[3][L], world[3][L];
+      for (int h = 0; h < L; h += H) {
+        Doubles gd[3];
+        for (int a = 0; a < 3; ++a) {
+          const Floats4 part = h == 0 ? __builtin_shufflevector(g[a], g[a], 0, 1, 2, 3) : __builtin_shufflevector(g[a], g[a], 4, 5, 6, 7);
+          gd[a] = __builtin_convertvector(part, Doubles) * to_unit;
+          std::memcpy(&gradient[a][h], &gd[a], sizeof gd[a]);
+        }
+        const auto has = (gd[0] != 0) | (gd[1] != 0) | (gd[2] != 0);
+        for (int k = 0; k < H; ++k) normal[h + k] = has[k] != 0;
+      }
+      for (int a = 0; a < 3; ++a)
+        for (int k = 0; k < L; ++k) world[a][k] = gradient[a][k] * r.unit_gradient_to_world_[a];
+      r.shading_.lighting_of_gradients(world, ray_light, ray_half, diffuse, specular);
+      for (int k = 0; k < L; ++k) {
+        const double length2 = world[0][k] * world[0][k] + world[1][k] * world[1][k] + world[2][k] * world[2][k];
+        const double t_middle = (k == 0 ? prev_t : tk[k - 1]) + double(fraction[k]) * (tk[k] - (k == 0 ? prev_t : tk[k - 1]));
+        if (normal[k] && length2 > 0 && length2 < kInf && t_middle > 0) continue;
+        const ShadingModel::Lighting l =
+            normal[k] ? lighting_at(t_middle, Vec3d(gradient[0][k], gradient[1][k], gradient[2][k]), ray) : ShadingModel::Lighting{};
+        counters.gradients -= normal[k];  // counted where used, as for every lane
+        diffuse[k] = l.diffuse, specular[k] = l.specular;
+      }
     }
 
     /// The first isosurface whose value going from value a to value b crosses (or lands on);
@@ -1841,6 +1930,19 @@ class GigaVoxelsRenderer final : public Renderer {
       px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
     }
 
+    /// A segment's lighting from its ends' (face_lighting.h): each end's stands for the part in
+    /// its own cell; the cells between take their mean, or (across_faces) the lighting at
+    /// their middle.
+    static float front_weight(const gigavoxels::FaceCrossings& f) {
+      return f.has_middle() || f.first == f.last ? f.middle() : 0.5f;
+    }
+    static ShadingModel::Lighting across_faces(const ShadingModel::Lighting& front, const ShadingModel::Lighting& middle,
+                                               const ShadingModel::Lighting& back, const gigavoxels::FaceCrossings& f) {
+      const float between = f.last - f.first, after = 1 - f.last;
+      return {f.first * front.diffuse + between * middle.diffuse + after * back.diffuse,
+              f.first * front.specular + between * middle.specular + after * back.specular};
+    }
+
     /// Whether a sample's gradient (per unit coordinate) gives it a normal: a zero gradient
     /// gives none, and so the ambient term alone.
     bool has_normal(const Vec3d& gradient) const { return gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0); }
@@ -1874,7 +1976,7 @@ class GigaVoxelsRenderer final : public Renderer {
     /// was computed (s.prev_lighting) for the next segment.
     [[gnu::always_inline]] bool integrate(RayState& s, PixelResult& px, float v, double t, double voxels, const Vec3d& g,
                                           const PrimaryRay& ray, const CellPoint* prev_at = nullptr,
-                                          const CellPoint* at = nullptr) {
+                                          const CellPoint* at = nullptr, const PathNode* lattice = nullptr) {
       Vec3f col;
       float a;
       r.preintegrated_.segment(s.prev_value, v, voxels, col, a);
@@ -1882,8 +1984,21 @@ class GigaVoxelsRenderer final : public Renderer {
       const ShadingModel::Lighting back = lighting_at(t, g, ray);
       if (!s.have_prev_lighting && s.have_prev_gradient) s.prev_lighting = lighting_at(s.prev_t, s.prev_gradient, ray);
       if (s.have_prev_gradient) {
-        const float front_weight = prev_at ? gigavoxels::front_lighting_weight(*prev_at, *at) : 0.5f;
-        composite(s, px, col, a, t, s.prev_lighting.mix(back, front_weight), g, ray);
+        const gigavoxels::FaceCrossings f = prev_at ? gigavoxels::face_crossings(*prev_at, *at) : gigavoxels::FaceCrossings{};
+        if (r.p_.middle_lighting && r.shading_.lit() && f.has_middle()) {
+          // The lighting where the cells between lie (their middle), as sample_run takes it.
+          double l[3];
+          for (int k = 0; k < 3; ++k) {
+            const float l0 = float(prev_at->cell[k]) + prev_at->u[k], l1 = float(at->cell[k]) + at->u[k];
+            l[k] = double(l0 + f.middle() * (l1 - l0));
+          }
+          Vec3d middle_gradient;
+          sample_brick_at(*lattice, l, &middle_gradient, nullptr);
+          const ShadingModel::Lighting middle = lighting_at(s.prev_t + double(f.middle()) * (t - s.prev_t), middle_gradient, ray);
+          composite(s, px, col, a, t, across_faces(s.prev_lighting, middle, back, f), g, ray);
+        } else {
+          composite(s, px, col, a, t, s.prev_lighting.mix(back, front_weight(f)), g, ray);
+        }
       } else {
         composite(s, px, col, a, t, back, g, ray);
       }
@@ -2041,6 +2156,9 @@ BackendEntry gigavoxels_backend() {
                                   "opacity counts less); 1: a fixed step"},
       {"face_lighting", 1, 0, 1, "lit DVR: 1 weights a segment's two end lightings by where it crosses cell faces (where the "
                                  "analytic gradient jumps; analytic normals only); 0: their mean"},
+      {"middle_lighting", 1, 0, 1, "lit DVR with face_lighting: 1 lights the cells a segment crosses between its first and "
+                                   "last cell faces with the lighting at their middle (one more gradient per such segment); "
+                                   "0: with the mean of its ends'"},
       {"sample_runs", 1, 0, 1, "DVR at one level: 1 takes runs of up to 8 samples along a ray side by side (SIMD), the "
                                "adaptive step fixed for a run (not under a point light, nor with difference normals); 0: "
                                "one sample at a time"},
@@ -2082,6 +2200,7 @@ BackendEntry gigavoxels_backend() {
     gp.hidden_crossings = int(p["hidden_crossings"]);
     gp.adaptive_step = p["adaptive_step"];
     gp.face_lighting = p["face_lighting"] != 0;
+    gp.middle_lighting = p["middle_lighting"] != 0;
     gp.sample_runs = p["sample_runs"] != 0;
     gp.termination_fill = p["termination_fill"] != 0;
     return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {

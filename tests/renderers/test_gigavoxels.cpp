@@ -580,6 +580,38 @@ TEST_F(GigaVoxels, TerminationFillGivesTheLightLeftTheMediumsColour) {
   EXPECT_GT(passed, 100);
 }
 
+TEST_F(GigaVoxels, MiddleLightingLowersLitDvrErrorWhereSegmentsCrossSeveralCells) {
+  // A segment that crosses two cell faces or more passes cells where the ray takes no sample;
+  // face_lighting alone lights them with its ends' mean. middle_lighting takes one more
+  // gradient, in their middle, and lights them with it: the error falls most where segments
+  // are longest (here 0.0150 -> 0.0113 at step 1, 0.0064 -> 0.0051 at step 0.5 under a
+  // headlight). One at a time and in sample runs alike.
+  const Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.25, "termination_opacity": 0.999}, "shading": {"light": "headlight"})", 64);
+  const FrameBuffers truth = reference_frame(sc);
+  const auto render = [&](double step, bool middle, bool runs) {
+    RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}, {"step", step}, {"adaptive_step", 1},
+                                                       {"middle_lighting", middle ? 1.0 : 0.0}, {"sample_runs", runs ? 1.0 : 0.0}}));
+    FrameBuffers fb;
+    const FrameStats st = g.render(0, fb, kAll);
+    EXPECT_TRUE(g.converged());
+    EXPECT_TRUE(all_finite(fb));
+    return std::pair{compare_frames(fb, truth, 1.0).rmse, st.counters};
+  };
+  for (const auto& [step, most] : {std::pair{1.0, 0.8}, std::pair{0.5, 0.88}})
+    for (const bool runs : {false, true}) {
+      const auto [ends, ends_counters] = render(step, false, runs);
+      const auto [middle, middle_counters] = render(step, true, runs);
+      EXPECT_LT(middle, most * ends) << "step " << step << (runs ? " in runs" : "") << ": lit in the middle " << middle
+                                     << ", by the ends' mean " << ends;
+      // The same samples, and a gradient more for some segments: at most one more per sample.
+      EXPECT_EQ(middle_counters.samples, ends_counters.samples);
+      EXPECT_GT(middle_counters.gradients, ends_counters.gradients);
+      EXPECT_LE(middle_counters.gradients, ends_counters.gradients + ends_counters.samples);
+      std::cout << "[ measured ] step " << step << (runs ? " in runs" : "") << ": RMSE " << ends << " by the ends' mean, "
+                << middle << " lit in the middle\n";
+    }
+}
+
 TEST(GigaVoxelsFaceLighting, EachEndStandsForItsOwnCellAndTheirMeanForTheCellsBetween) {
   using gigavoxels::CellPoint;
   using gigavoxels::front_lighting_weight;
@@ -1273,17 +1305,20 @@ TEST_F(GigaVoxels, DifferenceNormalsAreTheReferencesOwn) {
 
 TEST_F(GigaVoxels, QuadrilinearFilteringBeatsNearestLevelAgainstASupersampledReference) {
   // Far enough that coarse levels are chosen, the reference supersampled 5x5 and box-filtered.
+  // Both light a segment with its ends' mean: face_lighting needs both ends in one level's
+  // lattice, which blended samples are not, and would favour nearest level for its lighting.
   const std::string far = R"("camera": {"eye": [3.5, -2.4, 2.9], "target": [0.5, 0.5, 0.45], "fov_degrees": 35})";
   const FrameBuffers truth = resolve_supersampled(reference_frame(scene(dvr_scene(), 160, far), {}), 5);
   const Scene small = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 1})", 32, far);
   double err[2];
   for (int q = 0; q < 2; ++q) {
-    RenderSession g(small, backend_options("gigavoxels", {{"exact", 1}, {"quadrilinear", double(q)}, {"step", 0.25}}));
+    RenderSession g(small, backend_options("gigavoxels", {{"exact", 1}, {"quadrilinear", double(q)}, {"step", 0.25}, {"face_lighting", 0}}));
     FrameBuffers fb;
     g.render(0, fb, {});
     err[q] = compare_frames(fb, truth, 1.0).rmse;
   }
   EXPECT_LT(err[1], err[0]) << "quadrilinear " << err[1] << " vs nearest level " << err[0];
+  std::cout << "[ measured ] quadrilinear " << err[1] << " vs nearest level " << err[0] << "\n";
 }
 
 TEST_F(GigaVoxels, ArityThreeRendersTheInstancedMengerSpongeFromOneBrick) {
