@@ -5,8 +5,8 @@
 /// faces; shading a segment with the mean of its ends' lighting errs by the share of the
 /// segment on the wrong side of a face, which made lit DVR converge to first order in the
 /// step. Each end's lighting stands instead for the part of the segment in its own cell: up to
-/// the first face crossed, and from the last one; their mean stands for the cells between,
-/// where the ray takes no sample. For analytic normals alone: difference normals are
+/// the first face crossed, and from the last one; the cells between, where the ray takes no
+/// sample, take the lighting at their middle (gigavoxels' middle_lighting) or the ends' mean. For analytic normals alone: difference normals are
 /// continuous across cell faces.
 
 #include <algorithm>
@@ -30,6 +30,8 @@ struct FaceCrossings {
   /// The fraction of the segment where the cells between are, and its middle.
   bool has_middle() const { return first < last; }
   float middle() const { return 0.5f * (first + last); }
+  /// The front end's share when the cells between take the ends' mean (1/2: none crossed).
+  float front_weight() const { return has_middle() || first == last ? middle() : 0.5f; }
 };
 
 /// @brief FaceCrossings of the segment from a to b (points of one brick's cells).
@@ -54,8 +56,7 @@ inline FaceCrossings face_crossings(const CellPoint& a, const CellPoint& b) {
 /// brick's cells): the fraction of the segment before the first cell face it crosses plus half
 /// the fraction between its first and last. 1/2 when it crosses none; always in [0, 1].
 inline float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
-  const FaceCrossings f = face_crossings(a, b);
-  return f.has_middle() || f.first == f.last ? f.middle() : 0.5f;
+  return face_crossings(a, b).front_weight();
 }
 
 /// @brief face_crossings() for the 8 segments from point k to point k + 1 of a run of 9 points
@@ -95,10 +96,7 @@ inline void face_crossings(const int32_t (&cell)[3][9], const float (&u)[3][9], 
 inline void front_lighting_weights(const int32_t (&cell)[3][9], const float (&u)[3][9], float (&weight)[8]) {
   FaceCrossings crossings[8];
   face_crossings(cell, u, crossings);
-  for (int k = 0; k < 8; ++k) {
-    const FaceCrossings& f = crossings[k];
-    weight[k] = f.has_middle() || f.first == f.last ? f.middle() : 0.5f;
-  }
+  for (int k = 0; k < 8; ++k) weight[k] = crossings[k].front_weight();
 }
 
 }  // namespace brickyard::gigavoxels

@@ -1321,7 +1321,9 @@ class GigaVoxelsRenderer final : public Renderer {
           // The last segment's colour is its best guess (the reference's image and raymarch's
           // converge as the termination opacity goes to 1; this estimate converges faster:
           // its error is the light left times how far the colour drifts behind, not times all
-          // of it).
+          // of it). A ray whose very last segment reaches the opacity is filled too, though
+          // nothing lies behind it: an error of at most the light left (1 - the termination
+          // opacity) times its colour's distance to the background's.
           px.color = Vec3f(s.accum + Vec3d(s.last_color) * (1 - s.alpha));
           px.alpha = 1;
         } else {
@@ -1488,7 +1490,8 @@ class GigaVoxelsRenderer final : public Renderer {
     /// march_dvr<true>'s samples from t on, up to kRunLanes of them, taken side by side in
     /// vector lanes (GCC's vector extension): positions and cell groups (then the looks at
     /// them one by one, as march_dvr's), cells, gathered corners, values and gradients,
-    /// lighting, face weights, and segments (PreintegratedTf::segments); then the compositing
+    /// lighting, face weights and the lighting between faces (lighting_between), and segments
+    /// (PreintegratedTf::segments); then the compositing
     /// in order. The same samples and arithmetic as one at a time, but for the step: it stays
     /// dt across the run, where the adaptive step would grow it after each visible segment.
     /// A run ends at the node's exit (t_end), whose sample at t_face (the exit within the ray)
@@ -1656,14 +1659,14 @@ class GigaVoxelsRenderer final : public Renderer {
       float weight[L];
       gigavoxels::FaceCrossings crossings[L];
       bool middle[L] = {};  // lit between its first and last faces by the lighting at their middle
-      float middle_diffuse[L], middle_specular[L];
-      bool middle_normal[L];
+      float middle_diffuse[L] = {}, middle_specular[L] = {};
+      bool middle_normal[L] = {};
       if (face_lighting) {
         gigavoxels::face_crossings(cell, u, crossings);
         if (prev_lattice != &b) crossings[0] = {};  // its front end lies in another lattice
         bool any_middle = false;
         for (int k = 0; k < L; ++k) {
-          weight[k] = front_weight(crossings[k]);
+          weight[k] = crossings[k].front_weight();
           middle[k] = lit && r.p_.middle_lighting && k < n && alpha[k] > 0 && crossings[k].has_middle();
           any_middle |= middle[k];
         }
@@ -1930,12 +1933,8 @@ class GigaVoxelsRenderer final : public Renderer {
       px.color = r.shading_.shade(px.color, n, -ray.world.dir, l, false);
     }
 
-    /// A segment's lighting from its ends' (face_lighting.h): each end's stands for the part in
-    /// its own cell; the cells between take their mean, or (across_faces) the lighting at
-    /// their middle.
-    static float front_weight(const gigavoxels::FaceCrossings& f) {
-      return f.has_middle() || f.first == f.last ? f.middle() : 0.5f;
-    }
+    /// A segment's lighting from its ends' and its middle's (face_lighting.h): each end's
+    /// stands for the part in its own cell, the middle's for the cells between.
     static ShadingModel::Lighting across_faces(const ShadingModel::Lighting& front, const ShadingModel::Lighting& middle,
                                                const ShadingModel::Lighting& back, const gigavoxels::FaceCrossings& f) {
       const float between = f.last - f.first, after = 1 - f.last;
@@ -1970,7 +1969,8 @@ class GigaVoxelsRenderer final : public Renderer {
     /// DVR: integrates the segment from the previous sample to t, where the value is v and the
     /// gradient g (zero: ambient light alone at that end), `voxels` finest voxels long. Shaded
     /// with its ends' lighting, weighted by the cell faces between them where both lie in one
-    /// brick (prev_at and at: front_lighting_weight), else their mean (the back end's alone is
+    /// brick (prev_at and at of `lattice`: face_crossings), the cells between its first and
+    /// last faces lit at their middle (middle_lighting) or by the ends' mean; else their mean (the back end's alone is
     /// half a segment off; the lighting of a mean gradient is not the mean lighting where
     /// normals turn). Returns whether the segment showed anything, and so whether t's lighting
     /// was computed (s.prev_lighting) for the next segment.
@@ -1997,7 +1997,7 @@ class GigaVoxelsRenderer final : public Renderer {
           const ShadingModel::Lighting middle = lighting_at(s.prev_t + double(f.middle()) * (t - s.prev_t), middle_gradient, ray);
           composite(s, px, col, a, t, across_faces(s.prev_lighting, middle, back, f), g, ray);
         } else {
-          composite(s, px, col, a, t, s.prev_lighting.mix(back, front_weight(f)), g, ray);
+          composite(s, px, col, a, t, s.prev_lighting.mix(back, f.front_weight()), g, ray);
         }
       } else {
         composite(s, px, col, a, t, back, g, ray);
@@ -2157,7 +2157,8 @@ BackendEntry gigavoxels_backend() {
       {"face_lighting", 1, 0, 1, "lit DVR: 1 weights a segment's two end lightings by where it crosses cell faces (where the "
                                  "analytic gradient jumps; analytic normals only); 0: their mean"},
       {"middle_lighting", 1, 0, 1, "lit DVR with face_lighting: 1 lights the cells a segment crosses between its first and "
-                                   "last cell faces with the lighting at their middle (one more gradient per such segment); "
+                                   "last cell faces with the lighting at their middle (one more gradient per such visible "
+                                   "segment); "
                                    "0: with the mean of its ends'"},
       {"sample_runs", 1, 0, 1, "DVR at one level: 1 takes runs of up to 8 samples along a ray side by side (SIMD), the "
                                "adaptive step fixed for a run (not under a point light, nor with difference normals); 0: "
