@@ -1482,6 +1482,9 @@ class GigaVoxelsRenderer final : public Renderer {
 
     /// How many samples sample_run takes side by side: AVX2's floats.
     static constexpr int kRunLanes = 8;
+    // GCC's vector extension: AVX2 where the target has it (x86-64-v3 is the build's floor).
+    using LaneFloats = float __attribute__((vector_size(32)));
+    using LaneInts = int32_t __attribute__((vector_size(32)));
     /// How a run ended: none (t's group is clear: no run), advanced (t: the next sample
     /// position), finished (the ray is), exited (its last sample was the node's exit: t is past
     /// it), leapt (its last sample started a leap over clear groups: t is the first position
@@ -1502,10 +1505,9 @@ class GigaVoxelsRenderer final : public Renderer {
                    double unit_per_t, double stop, int& visible_group, CellPoint& prev_at, const PathNode*& prev_lattice,
                    bool face_lighting, const PrimaryRay& ray) {
       constexpr int L = kRunLanes;
-      // GCC's vector extension: AVX2 where the target has it (x86-64-v3 is the build's floor).
       // GCC 12's loop vectoriser left most of these lanes scalar, with their arrays spilled.
-      using Floats = float __attribute__((vector_size(32)));
-      using Ints = int32_t __attribute__((vector_size(32)));
+      using Floats = LaneFloats;
+      using Ints = LaneInts;
       using Doubles = double __attribute__((vector_size(32)));  // half the lanes
       using Floats4 = float __attribute__((vector_size(16)));
       using Ints4 = int32_t __attribute__((vector_size(16)));
@@ -1576,30 +1578,14 @@ class GigaVoxelsRenderer final : public Renderer {
       // Cells and values: brick_cell and sample_brick_at. Point 0 is the previous sample (face
       // weights), the run's samples are points 1..L. Lanes past n sample past the run, inside
       // the brick (clamped as every sample is), and are not used.
-      const int32_t e = r.m_ + 2;
       int32_t cell[3][L + 1];
       float u[3][L + 1];
       for (int a = 0; a < 3; ++a) cell[a][0] = prev_at.cell[a], u[a][0] = prev_at.u[a];
-      Floats uf[3];
-      Ints offset = {};
-      const Floats cell_top = Floats{} + float(e - 1);
-      const Ints last_cell = Ints{} + (e - 2);
-      for (int a = 2; a >= 0; --a) {
-        Floats x;
-        std::memcpy(&x, lf[a], sizeof x);
-        x = x > 0.0f ? (x < cell_top ? x : cell_top) : Floats{};  // brick_cell's clamp (NaN: 0)
-        Ints c = __builtin_convertvector(x, Ints);
-        c = c < last_cell ? c : last_cell;
-        uf[a] = x - __builtin_convertvector(c, Floats);
-        std::memcpy(&cell[a][1], &c, sizeof c), std::memcpy(&u[a][1], &uf[a], sizeof uf[a]);
-        offset = offset * e + c;  // (cell z * e + cell y) * e + cell x
-      }
-      int32_t offsets[L];
-      std::memcpy(offsets, &offset, sizeof offsets);
-      float corners[8][L];
-      gigavoxels::load_cell_corners(b.brick, offsets, e, corners);
-      Floats corner[8];
-      for (int i = 0; i < 8; ++i) std::memcpy(&corner[i], corners[i], sizeof corner[i]);
+      Floats x[3], uf[3], corner[8];
+      Ints cells[3];
+      for (int a = 0; a < 3; ++a) std::memcpy(&x[a], lf[a], sizeof x[a]);
+      cells_and_corners(b, x, cells, uf, corner);
+      for (int a = 0; a < 3; ++a) std::memcpy(&cell[a][1], &cells[a], sizeof cells[a]), std::memcpy(&u[a][1], &uf[a], sizeof uf[a]);
       float value[L + 1];  // point 0: the previous sample's
       value[0] = s.prev_value;
       double gradient[3][L];
@@ -1609,16 +1595,7 @@ class GigaVoxelsRenderer final : public Renderer {
         Vec3<Floats> g;
         const Floats v = trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g);
         std::memcpy(&value[1], &v, sizeof v);
-        for (int h = 0; h < L; h += H) {
-          Doubles gd[3];
-          for (int a = 0; a < 3; ++a) {
-            const Floats4 part = h == 0 ? __builtin_shufflevector(g[a], g[a], 0, 1, 2, 3) : __builtin_shufflevector(g[a], g[a], 4, 5, 6, 7);
-            gd[a] = __builtin_convertvector(part, Doubles) * to_unit;
-            std::memcpy(&gradient[a][h], &gd[a], sizeof gd[a]);
-          }
-          const auto has = (gd[0] != 0) | (gd[1] != 0) | (gd[2] != 0);
-          for (int k = 0; k < H; ++k) normal[h + k] = has[k] != 0;
-        }
+        gradients_in_doubles(g, to_unit, gradient, normal);
       } else {
         const Floats v = trilinear(corner, uf[0], uf[1], uf[2]);
         std::memcpy(&value[1], &v, sizeof v);
@@ -1670,7 +1647,7 @@ class GigaVoxelsRenderer final : public Renderer {
           middle[k] = lit && r.p_.middle_lighting && k < n && alpha[k] > 0 && crossings[k].has_middle();
           any_middle |= middle[k];
         }
-        if (any_middle) lighting_between(b, cell, u, crossings, tk, s.prev_t, ray, middle_diffuse, middle_specular, middle_normal);
+        if (any_middle) lighting_between(b, cell, u, crossings, middle, tk, s.prev_t, ray, middle_diffuse, middle_specular, middle_normal);
       } else {
         std::fill_n(weight, L, 0.5f);
       }
@@ -1728,55 +1705,37 @@ class GigaVoxelsRenderer final : public Renderer {
       return ending;
     }
 
-    /// The lighting in the middle of the cells each segment of a run crosses between its first
-    /// and last faces (crossings), as integrate() takes it one at a time: its point in brick
-    /// coordinates from its ends' cells (points k and k + 1 of cell and u), then brick_cell,
-    /// the corners, the analytic gradient and lighting_of_gradients, side by side; lighting_at
-    /// where that cannot light it. Its gradient is counted where it is used.
-    [[gnu::always_inline]] void lighting_between(const PathNode& b, const int32_t (&cell)[3][kRunLanes + 1],
-                                                 const float (&u)[3][kRunLanes + 1],
-                                                 const gigavoxels::FaceCrossings (&crossings)[kRunLanes],
-                                                 const double (&tk)[kRunLanes], double prev_t, const PrimaryRay& ray,
-                                                 float (&diffuse)[kRunLanes], float (&specular)[kRunLanes],
-                                                 bool (&normal)[kRunLanes]) {
-      constexpr int L = kRunLanes, H = L / 2;
-      using Floats = float __attribute__((vector_size(32)));
-      using Ints = int32_t __attribute__((vector_size(32)));
-      using Doubles = double __attribute__((vector_size(32)));
-      using Floats4 = float __attribute__((vector_size(16)));
-      float fraction[L];
-      for (int k = 0; k < L; ++k) fraction[k] = crossings[k].middle();
-      Floats at;
-      std::memcpy(&at, fraction, sizeof at);
+    /// brick_cell for kRunLanes points of brick b at brick coordinates x, side by side: their
+    /// cells c (clamped as brick_cell clamps; NaN: 0), the positions uf in them, and the cells'
+    /// corners.
+    [[gnu::always_inline]] void cells_and_corners(const PathNode& b, const LaneFloats (&x)[3], LaneInts (&c)[3],
+                                                  LaneFloats (&uf)[3], LaneFloats (&corner)[8]) const {
+      constexpr int L = kRunLanes;
       const int32_t e = r.m_ + 2;
-      const Floats cell_top = Floats{} + float(e - 1);
-      const Ints last_cell = Ints{} + (e - 2);
-      Floats uf[3];
-      Ints offset = {};
+      const LaneFloats cell_top = LaneFloats{} + float(e - 1);
+      const LaneInts last_cell = LaneInts{} + (e - 2);
+      LaneInts offset = {};
       for (int a = 2; a >= 0; --a) {
-        Ints c0, c1;
-        Floats u0, u1;
-        std::memcpy(&c0, &cell[a][0], sizeof c0), std::memcpy(&c1, &cell[a][1], sizeof c1);
-        std::memcpy(&u0, &u[a][0], sizeof u0), std::memcpy(&u1, &u[a][1], sizeof u1);
-        const Floats l0 = __builtin_convertvector(c0, Floats) + u0, l1 = __builtin_convertvector(c1, Floats) + u1;
-        Floats x = l0 + at * (l1 - l0);
-        x = x > 0.0f ? (x < cell_top ? x : cell_top) : Floats{};  // brick_cell's clamp (NaN: 0)
-        Ints c = __builtin_convertvector(x, Ints);
-        c = c < last_cell ? c : last_cell;
-        uf[a] = x - __builtin_convertvector(c, Floats);
-        offset = offset * e + c;
+        const LaneFloats clamped = x[a] > 0.0f ? (x[a] < cell_top ? x[a] : cell_top) : LaneFloats{};
+        c[a] = __builtin_convertvector(clamped, LaneInts);
+        c[a] = c[a] < last_cell ? c[a] : last_cell;
+        uf[a] = clamped - __builtin_convertvector(c[a], LaneFloats);
+        offset = offset * e + c[a];  // (cell z * e + cell y) * e + cell x
       }
       int32_t offsets[L];
       std::memcpy(offsets, &offset, sizeof offsets);
       float corners[8][L];
       gigavoxels::load_cell_corners(b.brick, offsets, e, corners);
-      Floats corner[8];
       for (int i = 0; i < 8; ++i) std::memcpy(&corner[i], corners[i], sizeof corner[i]);
-      Vec3<Floats> g;
-      trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g);
-      const double to_unit = b.scale * double(r.m_);
-      double gradient[3][L], world[3][L];
-      for (int h = 0; h < L; h += H) {
+    }
+    /// Gradient lanes (brick voxels) in doubles, in unit coordinates (to_unit), and whether
+    /// each has a normal (is not zero).
+    [[gnu::always_inline]] static void gradients_in_doubles(const Vec3<LaneFloats>& g, double to_unit,
+                                                            double (&gradient)[3][kRunLanes], bool (&normal)[kRunLanes]) {
+      using Doubles = double __attribute__((vector_size(32)));  // half the lanes
+      using Floats4 = float __attribute__((vector_size(16)));
+      constexpr int H = kRunLanes / 2;
+      for (int h = 0; h < kRunLanes; h += H) {
         Doubles gd[3];
         for (int a = 0; a < 3; ++a) {
           const Floats4 part = h == 0 ? __builtin_shufflevector(g[a], g[a], 0, 1, 2, 3) : __builtin_shufflevector(g[a], g[a], 4, 5, 6, 7);
@@ -1786,10 +1745,46 @@ class GigaVoxelsRenderer final : public Renderer {
         const auto has = (gd[0] != 0) | (gd[1] != 0) | (gd[2] != 0);
         for (int k = 0; k < H; ++k) normal[h + k] = has[k] != 0;
       }
+    }
+
+    /// The lighting in the middle of the cells each segment of a run crosses between its first
+    /// and last faces (crossings), as integrate() takes it one at a time: its point in brick
+    /// coordinates from its ends' cells (points k and k + 1 of cell and u), then brick_cell,
+    /// the corners, the analytic gradient and lighting_of_gradients, side by side; lighting_at
+    /// where that cannot light a lane it is used for. Its gradient is counted where it is used.
+    [[gnu::always_inline]] void lighting_between(const PathNode& b, const int32_t (&cell)[3][kRunLanes + 1],
+                                                 const float (&u)[3][kRunLanes + 1],
+                                                 const gigavoxels::FaceCrossings (&crossings)[kRunLanes],
+                                                 const bool (&used)[kRunLanes], const double (&tk)[kRunLanes], double prev_t, const PrimaryRay& ray,
+                                                 float (&diffuse)[kRunLanes], float (&specular)[kRunLanes],
+                                                 bool (&normal)[kRunLanes]) {
+      constexpr int L = kRunLanes;
+      using Floats = LaneFloats;
+      using Ints = LaneInts;
+      float fraction[L];
+      for (int k = 0; k < L; ++k) fraction[k] = crossings[k].middle();
+      Floats at;
+      std::memcpy(&at, fraction, sizeof at);
+      Floats x[3], uf[3], corner[8];
+      Ints c[3];
+      for (int a = 0; a < 3; ++a) {
+        Ints c0, c1;
+        Floats u0, u1;
+        std::memcpy(&c0, &cell[a][0], sizeof c0), std::memcpy(&c1, &cell[a][1], sizeof c1);
+        std::memcpy(&u0, &u[a][0], sizeof u0), std::memcpy(&u1, &u[a][1], sizeof u1);
+        const Floats l0 = __builtin_convertvector(c0, Floats) + u0, l1 = __builtin_convertvector(c1, Floats) + u1;
+        x[a] = l0 + at * (l1 - l0);
+      }
+      cells_and_corners(b, x, c, uf, corner);
+      Vec3<Floats> g;
+      trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g);
+      double gradient[3][L], world[3][L];
+      gradients_in_doubles(g, b.scale * double(r.m_), gradient, normal);
       for (int a = 0; a < 3; ++a)
         for (int k = 0; k < L; ++k) world[a][k] = gradient[a][k] * r.unit_gradient_to_world_[a];
       r.shading_.lighting_of_gradients(world, ray_light, ray_half, diffuse, specular);
       for (int k = 0; k < L; ++k) {
+        if (!used[k]) continue;
         const double length2 = world[0][k] * world[0][k] + world[1][k] * world[1][k] + world[2][k] * world[2][k];
         const double t_middle = (k == 0 ? prev_t : tk[k - 1]) + double(fraction[k]) * (tk[k] - (k == 0 ? prev_t : tk[k - 1]));
         if (normal[k] && length2 > 0 && length2 < kInf && t_middle > 0) continue;
