@@ -93,6 +93,7 @@ struct GigaVoxelsParams {
   bool middle_lighting = true; // and the cells between its first and last faces lit at their middle
   bool sample_runs = true;     // DVR at one level: runs of samples taken side by side (sample_run)
   bool termination_fill = true;  // DVR: a terminated ray's light left takes its last segment's colour
+  bool leap_chains = true;     // DVR at one level: leaps follow each other with no sample between (chain_leaps)
 };
 
 using gigavoxels::CellPoint;
@@ -360,6 +361,7 @@ class GigaVoxelsRenderer final : public Renderer {
     compaction_ = {};
     loader_seconds_ = 0;
     samples_in_runs_ = 0;
+    leaps_chained_ = 0;
     tree_.begin_feedback(frame_);
     if (!uses_ || uses_->width() != setup.width || uses_->height() != setup.height)
       uses_ = std::make_unique<gigavoxels::UseBuffer>(setup.width, setup.height, p_.slots_per_pixel);
@@ -380,6 +382,7 @@ class GigaVoxelsRenderer final : public Renderer {
         t.pixel(x, y, s, out);
       }
     samples_in_runs_.fetch_add(t.samples_in_runs, std::memory_order_relaxed);
+    leaps_chained_.fetch_add(t.leaps_chained, std::memory_order_relaxed);
   }
 
   void end_frame(const FrameSetup& setup, const FrameBuffers& out) override {
@@ -421,6 +424,7 @@ class GigaVoxelsRenderer final : public Renderer {
                      {"brick_pool_bytes", double(uint64_t(tree_.brick_capacity()) * slot_bytes(m_, !brick_differences_.empty()))},
                      {"bricks_used", double(tree_.bricks_used_this_frame())},
                      {"samples_in_runs", double(samples_in_runs_.load(std::memory_order_relaxed))},
+                     {"leaps_chained", double(leaps_chained_.load(std::memory_order_relaxed))},
                      {"failed_allocations", double(tree_.counters().failed_allocations - failed_before_)},
                      {"loader_ms", loader_seconds_ * 1e3}};
   }
@@ -728,6 +732,7 @@ class GigaVoxelsRenderer final : public Renderer {
     const bool runs;
     Vec3d ray_light{0.0}, ray_half{0.0};
     uint64_t samples_in_runs = 0;  // of counters.samples
+    uint64_t leaps_chained = 0;    // chain_leaps' leaps, each two samples fewer
 
     Tracer(const GigaVoxelsRenderer& renderer, const FrameSetup& s, RayCounters& c)
         : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), gradients(r.ctx_.needs_gradients(s.outputs)),
@@ -886,9 +891,47 @@ class GigaVoxelsRenderer final : public Renderer {
       const int i = group_at(b, t, g);
       t_leave = cube_crossing(b, g, b.group_distances[i], true);
       if (b.group_distances[i] == 0) return false;
-      const size_t e = size_t(r.m_) + 2;
-      voxel = float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
+      voxel = group_voxel(b, g);
       return true;
+    }
+    /// A voxel of cell group g of brick b (its lowest corner): in a clear group, it lies in the
+    /// same interval of hidden values (or on the same side of every isovalue) as the group's
+    /// and every clear group's it touches.
+    float group_voxel(const PathNode& b, const int g[3]) const {
+      const size_t e = size_t(r.m_) + 2;
+      return float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
+    }
+
+    /// Where a DVR leap to t_next (t_next - dt: its last position, in the clear groups it
+    /// leapt) goes on at one level. A leap ending in a clear group again takes a sample there,
+    /// whose segment from t_next - dt shows nothing when both ends lie in one interval of values
+    /// the transfer function hides: they do when their groups' voxels do (a clear group's
+    /// values lie in its voxel's interval), and then the pre-integrated segment between any two
+    /// such values is clear whatever they are. So the ray leaps on from t_next, while its group
+    /// is clear, in the interval of the last, and its clear groups reach 2 steps or more (a leap
+    /// of one step is a plain step, which samples): the samples left out added nothing, and
+    /// the last leap's last position starts the next segment as before. Rounding aside, the
+    /// sample positions taken are those of leaping one link at a time.
+    double chain_leaps(const PathNode& b, double t_next, double dt, double t_end, double t_face) {
+      double l[3];
+      int g[3];
+      brick_coordinates(b, t_next - dt, l);
+      if (b.group_distances[group_of(l, g)] == 0) return t_next;  // rounded onto a visible group
+      float voxel = group_voxel(b, g);
+      while (t_next < t_end) {
+        brick_coordinates(b, t_next, l);
+        const uint8_t distance = b.group_distances[group_of(l, g)];
+        if (distance == 0) break;
+        const float next = group_voxel(b, g);
+        if (next != voxel && r.scene_.value_range_visible(std::min(voxel, next), std::max(voxel, next))) break;
+        const double t_leave = cube_crossing(b, g, distance, true);
+        const double steps = std::ceil((std::max(std::min(t_leave, t_face), t_next) - t_next) / dt);
+        if (!(steps > 1)) break;
+        t_next += steps * dt;
+        voxel = next;
+        ++leaps_chained;
+      }
+      return t_next;
     }
 
     /// The cell group of brick b at t: its index, and its coordinates in g.
@@ -1403,6 +1446,7 @@ class GigaVoxelsRenderer final : public Renderer {
             }
             if (run == Run::exited) break;  // t is past the exit, as after the exit sample below
             if (run == Run::leapt) {  // as a leap below, whose first sample the run took
+              if (r.p_.leap_chains) t = chain_leaps(fine, t, dt, t_end, t_face);
               ++counters.samples;
               prev_lattice = nullptr;
               s.start_segment(sample(bl, t - dt, nullptr), t - dt);
@@ -1467,6 +1511,8 @@ class GigaVoxelsRenderer final : public Renderer {
           prev_at = at, prev_lattice = one_lattice ? bl.finer : nullptr;
         }
         if (leap) {  // the segment into the clear groups is closed: their last value starts the next
+          if constexpr (kOneLevel)
+            if (r.p_.leap_chains) t_next = chain_leaps(fine, t_next, dt, t_end, t_face);
           ++counters.samples;
           prev_lattice = nullptr;  // no gradient at the segment's start
           s.start_segment(sample(bl, t_next - dt, nullptr), t_next - dt);
@@ -2108,6 +2154,7 @@ class GigaVoxelsRenderer final : public Renderer {
   uint64_t last_pass_progress_ = 0, last_pass_requests_ = 0;
   uint64_t produced_before_ = 0, loaded_before_ = 0, failed_before_ = 0;
   mutable std::atomic<uint64_t> samples_in_runs_{0};  // this frame's samples that sample_run took, added once per tile
+  mutable std::atomic<uint64_t> leaps_chained_{0};    // this frame's leaps that chain_leaps took on, added once per tile
   int stalled_frames_ = 0;
   int frames_loading_ = 0;  // first passes in a row that only waited on loads
   double loader_seconds_ = 0;
@@ -2161,6 +2208,8 @@ BackendEntry gigavoxels_backend() {
       {"termination_fill", 1, 0, 1, "DVR: 1 gives the light left to a ray that early termination stops (quality."
                                     "termination_opacity) its last segment's colour, as if the medium went on alike; "
                                     "0: the background's, as if it ended there"},
+      {"leap_chains", 1, 0, 1, "DVR at one level: 1 leaps on from a leap that ends in clear cell groups of the same hidden "
+                               "value interval, with no sample between (it would show nothing); 0: a sample at each leap's end"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
@@ -2199,6 +2248,7 @@ BackendEntry gigavoxels_backend() {
     gp.middle_lighting = p["middle_lighting"] != 0;
     gp.sample_runs = p["sample_runs"] != 0;
     gp.termination_fill = p["termination_fill"] != 0;
+    gp.leap_chains = p["leap_chains"] != 0;
     return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       using Stored = decltype(stored);
       std::unique_ptr<Source> source;

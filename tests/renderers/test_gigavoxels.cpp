@@ -717,6 +717,62 @@ TEST_F(GigaVoxels, AdaptiveStepStillSeesAThinSheetPastEmptySpace) {
   }
 }
 
+TEST_F(GigaVoxels, LeapChainsLeaveOutOnlySamplesThatShowNothing) {
+  // A leap that ends in clear groups again leaps on with no sample there (chain_leaps) when the
+  // values at both ends lie in one interval the transfer function hides; each such leap leaves
+  // out two samples (the one where it ends and the value where the next begins), and the image
+  // is unchanged. A shell around a sphere, visible only between two hidden intervals (inside and
+  // outside), at steps of 8 voxels: a leap from outside can land inside, past the shell, where
+  // pre-integration sees the shell between the two values, so the chain must stop there (a
+  // guard these cases never needed: a clear group past the shell lies too near it for its own
+  // leap to reach 2 steps). Then the 64^3 sphere at the test's transfer function, one hidden
+  // interval, in runs and one at a time.
+  struct Case {
+    const char* what;
+    std::string scene_text, store;
+    double step, adaptive_step, runs;
+  };
+  const std::string shell = R"("mode": "dvr", "values": "stored", "quality": {"lod_ratio": 0.25}, "shading": {"light": "headlight"},
+      "transfer_function": {"points": [{"value": -0.02, "color": [0.2, 0.4, 0.9], "opacity": 0},
+      {"value": 0, "color": [1, 0.4, 0.2], "opacity": 0.8}, {"value": 0.02, "color": [0.2, 0.4, 0.9], "opacity": 0}]})";
+  const std::string sphere_store = dir_->file("sphere.store");
+  const std::string sphere = dvr_scene() + R"(, "values": "normalized", "quality": {"lod_ratio": 0.25})";
+  for (const Case& c : {Case{"shell, fixed step 3, one at a time", shell, sphere_store, 3, 1, 0},
+                        Case{"shell, fixed step 3, in runs", shell, sphere_store, 3, 1, 1},
+                        Case{"shell, adaptive step 2", shell, sphere_store, 2, 8, 1},
+                        Case{"sphere, step 1, one at a time", sphere, sphere_store, 1, 8, 0},
+                        Case{"sphere, step 1, in runs", sphere, sphere_store, 1, 8, 1}}) {
+    SCOPED_TRACE(c.what);
+    Scene sc = scene(c.scene_text, 96);
+    sc.dataset = c.store;
+    FrameBuffers fb[2];
+    FrameStats stats[2];
+    for (int chains = 0; chains < 2; ++chains) {
+      RenderSession g(sc, backend_options("gigavoxels", {{"exact", 1}, {"step", c.step}, {"adaptive_step", c.adaptive_step},
+                                                         {"sample_runs", c.runs}, {"leap_chains", double(chains)}}));
+      stats[chains] = g.render(0, fb[chains], kAll);
+      EXPECT_TRUE(g.converged());
+      ASSERT_TRUE(all_finite(fb[chains]));
+    }
+    const double chained = stats[1].backend_value("leaps_chained");
+    EXPECT_EQ(stats[0].backend_value("leaps_chained"), 0);
+    EXPECT_GT(chained, 0);
+    // Two samples fewer a chained leap; the table's slight opacity next to a hidden range, which
+    // the samples left out would have added, can move later samples a little (the adaptive step).
+    EXPECT_NEAR(double(stats[1].counters.samples), double(stats[0].counters.samples) - 2 * chained,
+                1e-4 * double(stats[0].counters.samples));
+    const ImageError e = compare_frames(fb[1], fb[0], 1.0);
+    EXPECT_LT(e.rmse, 1e-6) << e.to_json();
+    EXPECT_EQ(e.coverage_mismatch, 0u) << e.to_json();
+    EXPECT_LT(e.depth_max, 1e-6) << e.to_json();
+    size_t shown = 0;
+    for (size_t i = 0; i < fb[1].color.size(); ++i) shown += fb[1].color.data()[i].a > 0.1f;
+    EXPECT_GT(shown, fb[1].color.size() / 10);  // the shell or the sphere is seen
+    std::cout << "[ measured ] " << c.what << ": " << chained << " leaps chained, samples " << stats[0].counters.samples << " -> "
+              << stats[1].counters.samples << "\n";
+  }
+}
+
 TEST(GigaVoxelsCellGroups, DistancesAreChessboardDistancesToTheNearestVisibleGroup) {
   // Against brute force on random grids of every density, the brick sizes' grid widths among
   // them (M = 8, 32 and 81 give 3, 9 and 21); with no visible group, every group is far.
