@@ -499,7 +499,8 @@ class GigaVoxelsRenderer final : public Renderer {
               for (int x = gx * kCellGroup; x <= std::min((gx + 1) * kCellGroup, e - 1); ++x)
                 lo = std::min(lo, float(row[x])), hi = std::max(hi, float(row[x]));
             }
-          // NaN (never stored: the importers refuse it) would compare false: kept visible.
+          // A NaN voxel (never stored: the importers refuse it) is passed over by min and max; a group
+          // of NaN alone compares false: kept visible.
           distance[i] = !(lo <= hi) || scene_.value_range_visible(lo, hi) ? 0 : 1;
         }
     gigavoxels::chessboard_distances(groups_, distance);
@@ -894,41 +895,42 @@ class GigaVoxelsRenderer final : public Renderer {
       voxel = group_voxel(b, g);
       return true;
     }
-    /// A voxel of cell group g of brick b (its lowest corner): in a clear group, it lies in the
-    /// same interval of hidden values (or on the same side of every isovalue) as the group's
-    /// and every clear group's it touches.
+    /// A voxel of cell group g of brick b (its lowest corner). In a clear group, every value of
+    /// the group, and of each clear group touching it (touching groups share their boundary
+    /// voxels), lies in this voxel's interval of hidden values (or on its side of every isovalue).
     float group_voxel(const PathNode& b, const int g[3]) const {
       const size_t e = size_t(r.m_) + 2;
       return float(b.brick[(size_t(g[2]) * kCellGroup * e + size_t(g[1]) * kCellGroup) * e + size_t(g[0]) * kCellGroup]);
     }
+    /// DVR: whether every value between two clear groups' voxels is hidden, so that all values
+    /// of both groups lie in one interval the transfer function hides.
+    bool same_hidden_interval(float a, float b) const { return !r.scene_.value_range_visible(std::min(a, b), std::max(a, b)); }
+    /// How many steps dt a leap from t takes to the first sample position past where the clear
+    /// groups end (t_leave) or the node does (t_face): 1 or less is a plain step.
+    static double leap_steps(double t, double t_leave, double t_face, double dt) {
+      return std::ceil((std::max(std::min(t_leave, t_face), t) - t) / dt);
+    }
 
-    /// Where a DVR leap to t_next (t_next - dt: its last position, in the clear groups it
-    /// leapt) goes on at one level. A leap ending in a clear group again takes a sample there,
-    /// whose segment from t_next - dt shows nothing when both ends lie in one interval of values
-    /// the transfer function hides: they do when their groups' voxels do (a clear group's
-    /// values lie in its voxel's interval), and then the pre-integrated segment between any two
-    /// such values is clear whatever they are. So the ray leaps on from t_next, while its group
-    /// is clear, in the interval of the last, and its clear groups reach 2 steps or more (a leap
-    /// of one step is a plain step, which samples): the samples left out added nothing, and
-    /// the last leap's last position starts the next segment as before. Rounding aside, the
-    /// sample positions taken are those of leaping one link at a time.
-    double chain_leaps(const PathNode& b, double t_next, double dt, double t_end, double t_face) {
-      double l[3];
-      int g[3];
-      brick_coordinates(b, t_next - dt, l);
-      if (b.group_distances[group_of(l, g)] == 0) return t_next;  // rounded onto a visible group
-      float voxel = group_voxel(b, g);
-      while (t_next < t_end) {
-        brick_coordinates(b, t_next, l);
-        const uint8_t distance = b.group_distances[group_of(l, g)];
-        if (distance == 0) break;
-        const float next = group_voxel(b, g);
-        if (next != voxel && r.scene_.value_range_visible(std::min(voxel, next), std::max(voxel, next))) break;
-        const double t_leave = cube_crossing(b, g, distance, true);
-        const double steps = std::ceil((std::max(std::min(t_leave, t_face), t_next) - t_next) / dt);
+    /// Where a DVR leap goes on at one level. A leap that ends at t_next (its last position
+    /// t_next - dt, in the clear groups it leapt) takes a sample there, then leaps again if t_next
+    /// lies in clear groups. When the values at both ends lie in one interval the transfer
+    /// function hides (their groups' voxels do: group_voxel), the pre-integrated segment between
+    /// them is clear whatever they are, so the ray leaps on with no sample: while t_next's group
+    /// is clear, in the interval of the group of the last position, and its clear groups reach
+    /// 2 steps or more (a leap of one step is a plain step, which samples). Steps after the
+    /// first leap are next_dt (the adaptive step as the sample before the first leap left it).
+    /// The samples left out would have added only the pre-integration table's slight opacity
+    /// next to a hidden range; the positions taken are those of leaping one leap at a time.
+    /// Returns the last leap's end; dt becomes its step.
+    double chain_leaps(const PathNode& b, double t_next, double& dt, double next_dt, double t_end, double t_face) {
+      double t_leave;
+      float voxel, next;
+      while (t_next < t_end && clear_group(b, t_next - dt, t_leave, voxel) && clear_group(b, t_next, t_leave, next) &&
+             !std::isnan(voxel) && !std::isnan(next) && (next == voxel || same_hidden_interval(voxel, next))) {
+        const double steps = leap_steps(t_next, t_leave, t_face, next_dt);
         if (!(steps > 1)) break;
-        t_next += steps * dt;
-        voxel = next;
+        t_next += steps * next_dt;
+        dt = next_dt;
         ++leaps_chained;
       }
       return t_next;
@@ -987,7 +989,7 @@ class GigaVoxelsRenderer final : public Renderer {
       const bool coarse_clear = clear_group(*bl.coarse, t, t_coarse, coarse_voxel);
       t_leave = std::min(t_leave, t_coarse);
       if (!coarse_clear) return false;
-      return iso ? !crossing(coarse_voxel, voxel) : !r.scene_.value_range_visible(std::min(coarse_voxel, voxel), std::max(coarse_voxel, voxel));
+      return iso ? !crossing(coarse_voxel, voxel) : same_hidden_interval(coarse_voxel, voxel);
     }
 
     void pixel(int x, int y, RayState& s, FrameBuffers& out) {
@@ -1316,7 +1318,7 @@ class GigaVoxelsRenderer final : public Renderer {
             if (!leap) visible_until = t_leave;  // no need to look again before
           }
           if (leap) {  // a clear group's voxel stands in for a sample
-            const double steps = std::ceil((std::max(std::min(t_leave, t_face), t) - t) / dt);
+            const double steps = leap_steps(t, t_leave, t_face, dt);
             t_next = t + std::max(steps, 1.0) * dt;
             t_before = t_next - dt;  // the last position in the clear groups
             // Every value in the clear groups is on the voxel's side of every isovalue.
@@ -1446,7 +1448,7 @@ class GigaVoxelsRenderer final : public Renderer {
             }
             if (run == Run::exited) break;  // t is past the exit, as after the exit sample below
             if (run == Run::leapt) {  // as a leap below, whose first sample the run took
-              if (r.p_.leap_chains) t = chain_leaps(fine, t, dt, t_end, t_face);
+              if (r.p_.leap_chains) t = chain_leaps(fine, t, dt, finest_dt * s.step_scale, t_end, t_face);
               ++counters.samples;
               prev_lattice = nullptr;
               s.start_segment(sample(bl, t - dt, nullptr), t - dt);
@@ -1483,7 +1485,7 @@ class GigaVoxelsRenderer final : public Renderer {
           if (!leap) visible_until = t_leave;  // no need to look again before
         }
         if (leap) {
-          const double steps = std::ceil((std::max(std::min(t_leave, t_face), t) - t) / dt);
+          const double steps = leap_steps(t, t_leave, t_face, dt);
           leap = steps > 1;
           t_next = t + std::max(steps, 1.0) * dt;
         }
@@ -1512,7 +1514,7 @@ class GigaVoxelsRenderer final : public Renderer {
         }
         if (leap) {  // the segment into the clear groups is closed: their last value starts the next
           if constexpr (kOneLevel)
-            if (r.p_.leap_chains) t_next = chain_leaps(fine, t_next, dt, t_end, t_face);
+            if (r.p_.leap_chains) t_next = chain_leaps(fine, t_next, dt, finest_dt * s.step_scale, t_end, t_face);
           ++counters.samples;
           prev_lattice = nullptr;  // no gradient at the segment's start
           s.start_segment(sample(bl, t_next - dt, nullptr), t_next - dt);
@@ -1611,7 +1613,7 @@ class GigaVoxelsRenderer final : public Renderer {
             brick_coordinates(b, tk[n], l);
             group_of(l, g);
             const double t_leave = cube_crossing(b, g, distance, true);
-            const double steps = std::ceil((std::max(std::min(t_leave, t_face), tk[n]) - tk[n]) / dt);
+            const double steps = leap_steps(tk[n], t_leave, t_face, dt);
             ending = steps > 1 ? Run::leapt : Run::advanced;
             t_after = tk[n] + std::max(steps, 1.0) * dt;
             ++n;
@@ -2208,8 +2210,10 @@ BackendEntry gigavoxels_backend() {
       {"termination_fill", 1, 0, 1, "DVR: 1 gives the light left to a ray that early termination stops (quality."
                                     "termination_opacity) its last segment's colour, as if the medium went on alike; "
                                     "0: the background's, as if it ended there"},
-      {"leap_chains", 1, 0, 1, "DVR at one level: 1 leaps on from a leap that ends in clear cell groups of the same hidden "
-                               "value interval, with no sample between (it would show nothing); 0: a sample at each leap's end"},
+      {"leap_chains", 1, 0, 1, "DVR at one level: 1 leaps on, with no sample, from a leap that ends in clear cell groups "
+                               "of the same hidden value interval whose own leap reaches 2 steps (the sample would add only "
+                               "the pre-integration table's slight opacity next to a hidden range); 0: a sample at each "
+                               "leap's end"},
   };
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};

@@ -278,10 +278,11 @@ class GigaVoxels : public ::testing::Test {
     field_store("sphere", 64, "sphere.store");
   }
   static void TearDownTestSuite() { delete dir_; }
-  /// A procedural field sampled on n^3 as f32 in 8^3 bricks, as dir_'s store `name`; its path.
-  static std::string field_store(const std::string& field, int64_t n, const std::string& name, const FieldParamValues& params = {}) {
+  /// A procedural field sampled on n^3 as f32 in brick_size^3 bricks, as dir_'s store `name`; its path.
+  static std::string field_store(const std::string& field, int64_t n, const std::string& name, const FieldParamValues& params = {},
+                                 int brick_size = 8) {
     BuildOptions o;
-    o.brick_size = 8;
+    o.brick_size = brick_size;
     build_store(*make_field_source(make_field(field, params), {n, n, n}, ValueType::f32), dir_->file(name), o);
     return dir_->file(name);
   }
@@ -721,12 +722,13 @@ TEST_F(GigaVoxels, LeapChainsLeaveOutOnlySamplesThatShowNothing) {
   // A leap that ends in clear groups again leaps on with no sample there (chain_leaps) when the
   // values at both ends lie in one interval the transfer function hides; each such leap leaves
   // out two samples (the one where it ends and the value where the next begins), and the image
-  // is unchanged. A shell around a sphere, visible only between two hidden intervals (inside and
-  // outside), at steps of 8 voxels: a leap from outside can land inside, past the shell, where
-  // pre-integration sees the shell between the two values, so the chain must stop there (a
-  // guard these cases never needed: a clear group past the shell lies too near it for its own
-  // leap to reach 2 steps). Then the 64^3 sphere at the test's transfer function, one hidden
-  // interval, in runs and one at a time.
+  // and every other sample stay as they were, under a fixed step and the adaptive one (whose
+  // step the chain takes as the sample before it left it). A shell around a sphere, visible only
+  // between two hidden intervals (inside and outside), in 8^3 and 32^3 bricks, at steps up to 9
+  // voxels; then the sphere at the test's transfer function, one hidden interval. A chain must
+  // also stop where a leap from outside lands in clear groups inside, past the shell, where
+  // pre-integration sees the shell between the two values: no case here reaches that guard (a
+  // clear group past the shell lies too near it for its own leap to reach 2 steps), and it stays.
   struct Case {
     const char* what;
     std::string scene_text, store;
@@ -736,9 +738,12 @@ TEST_F(GigaVoxels, LeapChainsLeaveOutOnlySamplesThatShowNothing) {
       "transfer_function": {"points": [{"value": -0.02, "color": [0.2, 0.4, 0.9], "opacity": 0},
       {"value": 0, "color": [1, 0.4, 0.2], "opacity": 0.8}, {"value": 0.02, "color": [0.2, 0.4, 0.9], "opacity": 0}]})";
   const std::string sphere_store = dir_->file("sphere.store");
+  const std::string large_bricks = field_store("sphere", 96, "sphere-32.store", {{"radius", 0.4}}, 32);
   const std::string sphere = dvr_scene() + R"(, "values": "normalized", "quality": {"lod_ratio": 0.25})";
   for (const Case& c : {Case{"shell, fixed step 3, one at a time", shell, sphere_store, 3, 1, 0},
                         Case{"shell, fixed step 3, in runs", shell, sphere_store, 3, 1, 1},
+                        Case{"shell in 32^3 bricks, fixed step 6", shell, large_bricks, 6, 1, 1},
+                        Case{"shell in 32^3 bricks, fixed step 9", shell, large_bricks, 9, 1, 0},
                         Case{"shell, adaptive step 2", shell, sphere_store, 2, 8, 1},
                         Case{"sphere, step 1, one at a time", sphere, sphere_store, 1, 8, 0},
                         Case{"sphere, step 1, in runs", sphere, sphere_store, 1, 8, 1}}) {
@@ -759,8 +764,7 @@ TEST_F(GigaVoxels, LeapChainsLeaveOutOnlySamplesThatShowNothing) {
     EXPECT_GT(chained, 0);
     // Two samples fewer a chained leap; the table's slight opacity next to a hidden range, which
     // the samples left out would have added, can move later samples a little (the adaptive step).
-    EXPECT_NEAR(double(stats[1].counters.samples), double(stats[0].counters.samples) - 2 * chained,
-                1e-4 * double(stats[0].counters.samples));
+    EXPECT_EQ(double(stats[1].counters.samples), double(stats[0].counters.samples) - 2 * chained);
     const ImageError e = compare_frames(fb[1], fb[0], 1.0);
     EXPECT_LT(e.rmse, 1e-6) << e.to_json();
     EXPECT_EQ(e.coverage_mismatch, 0u) << e.to_json();
