@@ -52,13 +52,6 @@ inline FaceCrossings face_crossings(const CellPoint& a, const CellPoint& b) {
   return {first, std::clamp(last, first, 1.0f)};
 }
 
-/// @brief The weight of the front end's lighting for the segment from a to b (points of one
-/// brick's cells): the fraction of the segment before the first cell face it crosses plus half
-/// the fraction between its first and last. 1/2 when it crosses none; always in [0, 1].
-inline float front_lighting_weight(const CellPoint& a, const CellPoint& b) {
-  return face_crossings(a, b).front_weight();
-}
-
 /// @brief face_crossings() for the 8 segments from point k to point k + 1 of a run of 9 points
 /// (cells and positions per axis, then point), side by side in 8-lane vectors (GCC's vector
 /// extension: AVX2 where the target has it; GCC 12 left the same loop scalar), with the same
@@ -90,13 +83,6 @@ inline void face_crossings(const int32_t (&cell)[3][9], const float (&u)[3][9], 
   first = none ? Floats{} + 1.0f : first;
   last = none ? Floats{} : last;
   for (int k = 0; k < 8; ++k) crossings[k] = {first[k], last[k]};
-}
-
-/// @brief front_lighting_weight() for the 8 segments of a run of 9 points (face_crossings()).
-inline void front_lighting_weights(const int32_t (&cell)[3][9], const float (&u)[3][9], float (&weight)[8]) {
-  FaceCrossings crossings[8];
-  face_crossings(cell, u, crossings);
-  for (int k = 0; k < 8; ++k) weight[k] = crossings[k].front_weight();
 }
 
 }  // namespace brickyard::gigavoxels

@@ -1681,8 +1681,7 @@ class GigaVoxelsRenderer final : public Renderer {
           diffuse[k] = l.diffuse, specular[k] = l.specular;
         }
       }
-      float weight[L];
-      gigavoxels::FaceCrossings crossings[L];
+      gigavoxels::FaceCrossings crossings[L];  // none crossed (front weight 1/2) without face lighting
       bool middle[L] = {};  // lit between its first and last faces by the lighting at their middle
       float middle_diffuse[L] = {}, middle_specular[L] = {};
       bool middle_normal[L] = {};
@@ -1691,13 +1690,10 @@ class GigaVoxelsRenderer final : public Renderer {
         if (prev_lattice != &b) crossings[0] = {};  // its front end lies in another lattice
         bool any_middle = false;
         for (int k = 0; k < L; ++k) {
-          weight[k] = crossings[k].front_weight();
           middle[k] = lit && r.p_.middle_lighting && k < n && alpha[k] > 0 && crossings[k].has_middle();
           any_middle |= middle[k];
         }
         if (any_middle) lighting_between(b, cell, u, crossings, middle, tk, s.prev_t, ray, middle_diffuse, middle_specular, middle_normal);
-      } else {
-        std::fill_n(weight, L, 0.5f);
       }
       // Compositing, in order (integrate and composite).
       const ShadingModel::Lighting none{};
@@ -1717,7 +1713,7 @@ class GigaVoxelsRenderer final : public Renderer {
               counters.gradients += middle_normal[k];
               light = across_faces(front_light, {middle_diffuse[k], middle_specular[k]}, here, crossings[k]);
             } else {
-              light = front_light.mix(here, weight[k]);
+              light = front_light.mix(here, crossings[k].front_weight());
             }
           }
           const Vec3f c = r.shading_.apply(color[k], lit ? light : none);

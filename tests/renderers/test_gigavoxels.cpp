@@ -616,7 +616,8 @@ TEST_F(GigaVoxels, MiddleLightingLowersLitDvrErrorWhereSegmentsCrossSeveralCells
 
 TEST(GigaVoxelsFaceLighting, EachEndStandsForItsOwnCellAndTheirMeanForTheCellsBetween) {
   using gigavoxels::CellPoint;
-  using gigavoxels::front_lighting_weight;
+  // The front end's share of the lighting: before the first face plus half of the cells between.
+  const auto front_lighting_weight = [](const CellPoint& a, const CellPoint& b) { return gigavoxels::face_crossings(a, b).front_weight(); };
   const auto at = [](double x, double y, double z) {
     CellPoint p;
     const double l[3] = {x, y, z};
@@ -640,10 +641,9 @@ TEST(GigaVoxelsFaceLighting, EachEndStandsForItsOwnCellAndTheirMeanForTheCellsBe
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> pos(0.0, 32.999), delta(-4.0, 4.0);
   double worst = 0;
-  // Runs of 8 segments side by side (front_lighting_weights): each is front_lighting_weight.
+  // Runs of 8 segments side by side: each lane's crossings and weight are one at a time's.
   int32_t run_cell[3][9];
   float run_u[3][9];
-  float run_weight[8];
   gigavoxels::FaceCrossings run_crossings[8];
   std::vector<float> one_by_one;
   std::vector<gigavoxels::FaceCrossings> crossings_one_by_one;
@@ -667,10 +667,9 @@ TEST(GigaVoxelsFaceLighting, EachEndStandsForItsOwnCellAndTheirMeanForTheCellsBe
       crossings_one_by_one.push_back(gigavoxels::face_crossings(prev, a));
     }
     if (n % 9 == 8) {
-      gigavoxels::front_lighting_weights(run_cell, run_u, run_weight);
       gigavoxels::face_crossings(run_cell, run_u, run_crossings);
       for (int k = 0; k < 8; ++k) {
-        ASSERT_EQ(run_weight[k], one_by_one[size_t(k)]) << "run ending at " << n << ", lane " << k;
+        ASSERT_EQ(run_crossings[k].front_weight(), one_by_one[size_t(k)]) << "run ending at " << n << ", lane " << k;
         ASSERT_EQ(run_crossings[k].first, crossings_one_by_one[size_t(k)].first) << "run ending at " << n << ", lane " << k;
         ASSERT_EQ(run_crossings[k].last, crossings_one_by_one[size_t(k)].last) << "run ending at " << n << ", lane " << k;
         ASSERT_LE(run_crossings[k].first, run_crossings[k].last + (run_crossings[k].first == 1 && run_crossings[k].last == 0));
