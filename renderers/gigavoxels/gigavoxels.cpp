@@ -791,6 +791,28 @@ class GigaVoxelsRenderer final : public Renderer {
 #endif
       }
     }
+    /// DVR at one level: from what step on (in voxels) a ray asks for the cells of a brick's
+    /// first samples as it enters (prefetch_entry_samples).
+    static constexpr double kEntryPrefetchStep = 2;
+    /// How many sample positions from a brick's entry that asks for, the exit sample's included.
+    static constexpr int kEntryPrefetches = 5;
+    /// Asks for the cells of the first kEntryPrefetches sample positions from t, one step dt
+    /// apart, the exit sample at t_face standing in for those at or past t_end. At steps of 2
+    /// voxels and more they are most or all of a brick's samples, and each would otherwise wait
+    /// for its rows only when reached: a lit 512x512 DVR frame of fBm 1024^3 u16 took 3% less
+    /// at step 4 and 8% less at step 16; at step 1, where sample runs read the first positions
+    /// at once, 1-2% more. A hint only: nothing read changes.
+    void prefetch_entry_samples(const PathNode& b, double t, double dt, double t_end, double t_face) const {
+      for (int k = 0; k < kEntryPrefetches; ++k) {
+        double tk = t + k * dt;
+        const bool exit = !(tk < t_end);
+        if (exit) tk = t_face;
+        double l[3];
+        brick_coordinates(b, tk, l);
+        prefetch_cell(b, l);
+        if (exit) break;
+      }
+    }
     /// Trilinear value (and gradient per unit coordinate) of a brick at ray parameter t, and
     /// where in the brick's cells t fell (at).
     float sample_brick(const PathNode& b, double t, Vec3d* gradient, CellPoint* at = nullptr) const {
@@ -1409,6 +1431,8 @@ class GigaVoxelsRenderer final : public Renderer {
       // Difference normals are continuous across cell faces (they jump only at store-brick
       // faces, one in M, as the reference's do): their ends' mean serves.
       const bool face_lighting = r.p_.face_lighting && gradients && r.shading_.lit() && r.scene_.shading.normals == NormalMethod::analytic;
+      if constexpr (kOneLevel)
+        if (r.step_ * s.step_scale >= kEntryPrefetchStep) prefetch_entry_samples(fine, t, finest_dt * s.step_scale, t_end, t_face);
       // One more sample at the node's exit, so that the part-step to it is integrated even
       // when the next node takes no samples (hidden, or past the ray's end: on Marschner-Lobb
       // 64^3 at step 1, leaving that out doubled the error).
