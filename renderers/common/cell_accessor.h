@@ -35,6 +35,12 @@ class CellAccessor {
 
   const Vec3s& dims() const { return dims_; }
 
+  /// @brief The brick holding cell (i, j, k) of the level (i, j, k >= 0); cells past the last
+  /// brick belong to it.
+  Vec3s brick_of(int64_t i, int64_t j, int64_t k) const {
+    return {std::min(i / M_, bricks_.x - 1), std::min(j / M_, bricks_.y - 1), std::min(k / M_, bricks_.z - 1)};
+  }
+
   /// @brief The 8 corner values of cell (i, j, k), index dx + 2 dy + 4 dz. The cell must lie
   /// in the level (0 <= i < dims); corners past the last voxel clamp.
   template <typename V>
@@ -43,7 +49,7 @@ class CellAccessor {
       for (int n = 0; n < 8; ++n) c[n] = voxel<V>(i + (n & 1), j + ((n >> 1) & 1), k + ((n >> 2) & 1));
       return;
     }
-    const Vec3s b{std::min(i / M_, bricks_.x - 1), std::min(j / M_, bricks_.y - 1), std::min(k / M_, bricks_.z - 1)};
+    const Vec3s b = brick_of(i, j, k);
     bind(b);
     if (!data_) {
       for (int n = 0; n < 8; ++n) c[n] = V(constant_);

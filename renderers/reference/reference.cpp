@@ -87,7 +87,6 @@ class ReferenceRenderer final : public Renderer {
     const Vec3s d = geo_.dims;
     cells_ = Vec3s(std::max<int64_t>(1, d.x - 1), std::max<int64_t>(1, d.y - 1), std::max<int64_t>(1, d.z - 1));
     finest_ = ctx.layout().finest();
-    finest_bricks_ = ctx.layout().level_bricks(finest_);
     M_ = ctx.layout().brick_size;
   }
 
@@ -116,14 +115,13 @@ class ReferenceRenderer final : public Renderer {
           gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
     /// Whether the brick holding cell (i, j, k) can contribute (node table): others are never fetched.
-    /// (Per sample: the layout's brick counts were about 13% of a DVR frame; the bounds test spares
-    /// the three divisions too. A cell clamped into the last brick takes the longer way, to the
-    /// same answer.)
+    /// (Per sample: recomputing the layout's brick counts was about 13% of a DVR frame; the bounds
+    /// test spares the three divisions too. A cell clamped into the last brick takes the longer
+    /// way, to the same answer.)
     bool cell_visible(int64_t i, int64_t j, int64_t k) {
       if (i >= visible_lo.x && i < visible_hi.x && j >= visible_lo.y && j < visible_hi.y && k >= visible_lo.z && k < visible_hi.z)
         return visible;
-      const Vec3s& bricks = r.finest_bricks_;
-      const Vec3s b{std::min(i / r.M_, bricks.x - 1), std::min(j / r.M_, bricks.y - 1), std::min(k / r.M_, bricks.z - 1)};
+      const Vec3s b = cells.brick_of(i, j, k);
       for (int a = 0; a < 3; ++a) visible_lo[a] = b[a] * r.M_, visible_hi[a] = visible_lo[a] + r.M_;
       if (b == visible_brick) return visible;
       ++counters.nodes;
@@ -357,7 +355,6 @@ class ReferenceRenderer final : public Renderer {
   std::unique_ptr<AnalyticTruth> truth_;
   ShadingModel shading_;
   Vec3s cells_;
-  Vec3s finest_bricks_;
   int finest_ = 0;
   int64_t M_ = 32;
 };
