@@ -152,14 +152,15 @@ struct BrickCache::Impl {
     std::atomic<uint64_t> lookups{0}, hits{0}, constant_hits{0};
   };
 
-  // Loader queue. queue_mutex guards heap, pending, in_flight, ready, failed, frame_requests
-  // and the request counters; the workers wait on work_cv, wait_idle() on idle_cv.
+  // Loader queue. queue_mutex guards heap, pending, in_flight, ready, ready_keys, failed,
+  // frame_requests and the request counters; the workers wait on work_cv, wait_idle() on idle_cv.
   mutable std::mutex queue_mutex;
   std::condition_variable work_cv, idle_cv;
   std::priority_queue<HeapEntry> heap;
   absl::flat_hash_map<uint64_t, Pending> pending;
-  absl::flat_hash_set<uint64_t> in_flight;
+  absl::flat_hash_set<uint64_t> in_flight;  // being read and decoded, or placed in the pool
   std::deque<Ready> ready;
+  absl::flat_hash_set<uint64_t> ready_keys;  // ready's: decoded, waiting for an upload budget
   absl::flat_hash_map<uint64_t, std::string> failed;
   absl::flat_hash_map<uint64_t, float> this_frame_requests;
   std::vector<BrickRequest> last_frame_requests;
@@ -248,7 +249,7 @@ void BrickCache::worker_loop() {
       m.heap.pop();
       auto it = m.pending.find(top.key);
       if (it == m.pending.end() || it->second.priority != top.priority) {
-        if (m.pending.empty() && m.in_flight.empty()) m.idle_cv.notify_all();
+        notify_if_idle_locked();
         continue;  // stale: served, dropped or re-prioritised
       }
       key = top.key;
@@ -270,17 +271,29 @@ void BrickCache::worker_loop() {
         }
       }
     }
-    // Step 2: hand the brick to the upload queue, and upload what the budget allows.
+    // Step 2: hand the brick to the upload queue, and upload what the budget allows. It stays
+    // in flight until it is placed (by whichever thread drains it) or left for a later frame's
+    // budget: until then wait_idle() must not return, nor a renewed request queue it again.
     {
       std::lock_guard lock(m.queue_mutex);
       if (!error.empty()) m.failed.emplace(key, error);
-      if (data) m.ready.push_back({key, std::move(data), requested_ns});
-      m.in_flight.erase(key);
+      if (data) {
+        m.ready.push_back({key, std::move(data), requested_ns});
+        m.ready_keys.insert(key);
+      } else {
+        m.in_flight.erase(key);
+      }
     }
     drain_ready();
     std::lock_guard lock(m.queue_mutex);
-    if (m.pending.empty() && m.in_flight.empty()) m.idle_cv.notify_all();
+    if (m.ready_keys.contains(key)) m.in_flight.erase(key);  // deferred: no longer in flight
+    notify_if_idle_locked();
   }
+}
+
+void BrickCache::notify_if_idle_locked() {
+  Impl& m = *impl_;
+  if (m.pending.empty() && m.in_flight.empty()) m.idle_cv.notify_all();
 }
 
 BrickBuffer BrickCache::load_from_store(const lmdb::ReadTxn& txn, const BrickKey& key) {
@@ -319,6 +332,8 @@ void BrickCache::drain_ready() {
       }
       r = std::move(m.ready.front());
       m.ready.pop_front();
+      m.ready_keys.erase(r.key);
+      m.in_flight.insert(r.key);  // being placed (a brick deferred earlier had left it)
     }
     const uint32_t slot = slots_.reserve(r.key);
     if (slot == kNoSlot) {
@@ -326,12 +341,16 @@ void BrickCache::drain_ready() {
       // budget back; in the second case keep the brick for a later frame.
       m.frame_uploads.fetch_sub(1);
       m.frame_upload_bytes.fetch_sub(brick_bytes_);
+      std::lock_guard lock(m.queue_mutex);
+      m.in_flight.erase(r.key);
       if (!slots_.contains(r.key)) {
-        std::lock_guard lock(m.queue_mutex);
+        m.ready_keys.insert(r.key);
         m.ready.push_front(std::move(r));
         m.deferred.fetch_add(1, std::memory_order_relaxed);
+        notify_if_idle_locked();
         return;
       }
+      notify_if_idle_locked();
       continue;
     }
     std::memcpy(pool_.get() + size_t(slot) * brick_bytes_, r.data->data(), brick_bytes_);
@@ -340,6 +359,9 @@ void BrickCache::drain_ready() {
     m.latency.add(double(now_ns() - r.requested_ns) * 1e-9);
     if (m.trace)
       m.trace->add(BrickKey::from_code(r.key), uint32_t(m.frame.load()), uint32_t(brick_bytes_), AccessKind::prefetch_fill, 2);
+    std::lock_guard lock(m.queue_mutex);  // counted, then out of flight: wait_idle() sees both
+    m.in_flight.erase(r.key);
+    notify_if_idle_locked();
   }
 }
 
@@ -463,7 +485,7 @@ void BrickCache::enqueue_locked(const std::vector<BrickRequest>& batch) {
       }
       continue;
     }
-    if (m.in_flight.contains(code) || slots_.contains(code)) {
+    if (m.in_flight.contains(code) || m.ready_keys.contains(code) || slots_.contains(code)) {
       ++m.merged;
       continue;
     }

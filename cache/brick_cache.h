@@ -195,6 +195,8 @@ class BrickCache {
   void enqueue_locked(const std::vector<BrickRequest>& batch);
   /// Uploads loaded bricks into the pool while this frame's budget allows.
   void drain_ready();
+  /// Wakes wait_idle() when nothing is queued or in flight; the caller holds the queue mutex.
+  void notify_if_idle_locked();
 
   const BrickStore& store_;
   CacheConfig config_;

@@ -185,6 +185,53 @@ TEST_F(BrickCacheTest, UploadsRespectThePerFrameBudget) {
   for (int i = 0; i < 20; ++i) EXPECT_TRUE(cache.lookup(keys[size_t(i)], 0, false).resident());
 }
 
+TEST_F(BrickCacheTest, ABrickLoadedAndWaitingForTheUploadBudgetIsNotRequestedAgain) {
+  // A renderer renews its requests every frame until the bricks are resident. One that is
+  // decoded and waits for a later frame's upload budget is on its way: asking for it again
+  // must not queue a second load (from L2), which would be read and dropped.
+  CacheConfig c = small_config(64, 64, store_->format().bytes());
+  c.upload_bricks_per_frame = 4;
+  BrickCache cache(*store_, c);
+  const auto keys = finest_keys(*store_);
+  constexpr int kBricks = 16;
+  int frames = 0;
+  for (bool all_resident = false; !all_resident && frames < 10; ++frames) {
+    cache.frame_begin();
+    all_resident = true;
+    for (int i = 0; i < kBricks; ++i) all_resident &= cache.lookup(keys[size_t(i)], 1.0f).resident();
+    cache.frame_end();
+    cache.wait_idle();
+  }
+  EXPECT_EQ(frames, kBricks / 4);  // a budget's worth a frame: the last frame sees them all
+  const CacheStats s = cache.stats();
+  EXPECT_EQ(s.requests, uint64_t(kBricks));
+  EXPECT_EQ(s.l2.hits, 0u) << "a brick was loaded twice";
+  EXPECT_EQ(s.uploads, uint64_t(kBricks));
+}
+
+TEST_F(BrickCacheTest, WaitIdleReturnsOnlyOnceEveryBrickItWasAskedForIsResident) {
+  // wait_idle() promises every queued brick placed in the pool (none is held back by an
+  // upload budget here). A loader thread that has decoded a brick but not yet placed it must
+  // keep it counted as in flight, or another thread's idle signal lets wait_idle() return
+  // early. Many small batches on 4 loader threads, from L2 after the first pass (loads at
+  // their shortest, so placing is the larger part), give that window many chances.
+  CacheConfig c = small_config(64, 1024, store_->format().bytes());
+  c.loader_threads = 4;
+  BrickCache cache(*store_, c);
+  const auto keys = finest_keys(*store_);
+  constexpr size_t kBatch = 16;
+  int early = 0;
+  for (size_t round = 0; round < 600; ++round) {
+    cache.frame_begin();
+    const size_t first = round * kBatch % (keys.size() - kBatch);
+    for (size_t i = first; i < first + kBatch; ++i) cache.lookup(keys[i], 1.0f);
+    cache.frame_end();
+    cache.wait_idle();
+    for (size_t i = first; i < first + kBatch; ++i) early += !cache.lookup(keys[i], 0, false).resident();
+  }
+  EXPECT_EQ(early, 0) << "bricks not yet resident when wait_idle() returned";
+}
+
 TEST_F(BrickCacheTest, RequestsNotRenewedAreDroppedAtFrameEnd) {
   CacheConfig c = small_config(512, 512, store_->format().bytes());
   c.loader_threads = 1;
