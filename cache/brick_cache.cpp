@@ -140,6 +140,7 @@ struct BrickCache::Impl {
     uint64_t key;
     BrickBuffer data;
     uint64_t requested_ns;
+    uint64_t ticket;  // which load of the key this is (ready_keys)
   };
   struct alignas(64) RequestStripe {
     std::mutex mutex;
@@ -158,9 +159,14 @@ struct BrickCache::Impl {
   std::condition_variable work_cv, idle_cv;
   std::priority_queue<HeapEntry> heap;
   absl::flat_hash_map<uint64_t, Pending> pending;
-  absl::flat_hash_set<uint64_t> in_flight;  // being read and decoded, or placed in the pool
+  // Keys being read and decoded, or placed in the pool; a decoded key waits in ready as in
+  // flight until its loader's drain_ready() returns, and after that as deferred.
+  absl::flat_hash_set<uint64_t> in_flight;
   std::deque<Ready> ready;
-  absl::flat_hash_set<uint64_t> ready_keys;  // ready's: decoded, waiting for an upload budget
+  // The keys of ready (decoded, waiting for an upload budget) and their loads' tickets: requests
+  // for them are merged, and a loader leaves in_flight only for its own load of a key.
+  absl::flat_hash_map<uint64_t, uint64_t> ready_keys;
+  uint64_t next_ticket = 1;  // 0: no load queued
   absl::flat_hash_map<uint64_t, std::string> failed;
   absl::flat_hash_map<uint64_t, float> this_frame_requests;
   std::vector<BrickRequest> last_frame_requests;
@@ -274,19 +280,23 @@ void BrickCache::worker_loop() {
     // Step 2: hand the brick to the upload queue, and upload what the budget allows. It stays
     // in flight until it is placed (by whichever thread drains it) or left for a later frame's
     // budget: until then wait_idle() must not return, nor a renewed request queue it again.
+    uint64_t ticket = 0;  // none queued
     {
       std::lock_guard lock(m.queue_mutex);
       if (!error.empty()) m.failed.emplace(key, error);
       if (data) {
-        m.ready.push_back({key, std::move(data), requested_ns});
-        m.ready_keys.insert(key);
+        ticket = m.next_ticket++;
+        m.ready.push_back({key, std::move(data), requested_ns, ticket});
+        m.ready_keys.emplace(key, ticket);
       } else {
         m.in_flight.erase(key);
       }
     }
     drain_ready();
     std::lock_guard lock(m.queue_mutex);
-    if (m.ready_keys.contains(key)) m.in_flight.erase(key);  // deferred: no longer in flight
+    // Still waiting: deferred, no longer in flight. (A later load of the same key, once this
+    // one was placed and evicted, has its own ticket and stays in flight.)
+    if (auto it = m.ready_keys.find(key); it != m.ready_keys.end() && it->second == ticket) m.in_flight.erase(key);
     notify_if_idle_locked();
   }
 }
@@ -341,17 +351,15 @@ void BrickCache::drain_ready() {
       // budget back; in the second case keep the brick for a later frame.
       m.frame_uploads.fetch_sub(1);
       m.frame_upload_bytes.fetch_sub(brick_bytes_);
+      const bool resident = slots_.contains(r.key);  // before the lock: it may spin on a writer
       std::lock_guard lock(m.queue_mutex);
       m.in_flight.erase(r.key);
-      if (!slots_.contains(r.key)) {
-        m.ready_keys.insert(r.key);
-        m.ready.push_front(std::move(r));
-        m.deferred.fetch_add(1, std::memory_order_relaxed);
-        notify_if_idle_locked();
-        return;
-      }
       notify_if_idle_locked();
-      continue;
+      if (resident) continue;
+      m.ready_keys.emplace(r.key, r.ticket);
+      m.ready.push_front(std::move(r));
+      m.deferred.fetch_add(1, std::memory_order_relaxed);
+      return;
     }
     std::memcpy(pool_.get() + size_t(slot) * brick_bytes_, r.data->data(), brick_bytes_);
     slots_.publish(slot);
