@@ -330,16 +330,22 @@ BrickBuffer BrickCache::load_from_store(const lmdb::ReadTxn& txn, const BrickKey
 void BrickCache::drain_ready() {
   Impl& m = *impl_;
   const uint64_t brick_limit = config_.upload_bricks_per_frame, byte_limit = config_.upload_bytes_per_frame;
+  // Bricks that no slot could be freed for (every slot of their shard pinned) wait aside while
+  // the rest are placed, then go back to the front for a later frame; in flight meanwhile, so
+  // that a renewed request is merged.
+  std::vector<Impl::Ready> unplaced;
   while (true) {
     Impl::Ready r;
+    uint64_t claimed_in = 0;  // the frame whose budget this brick claimed
     {
       std::lock_guard lock(m.queue_mutex);
-      if (m.ready.empty()) return;
-      if (!claim_budget(m.frame_uploads, 1, brick_limit)) return;
+      if (m.ready.empty()) break;
+      if (!claim_budget(m.frame_uploads, 1, brick_limit)) break;
       if (!claim_budget(m.frame_upload_bytes, brick_bytes_, byte_limit)) {
         m.frame_uploads.fetch_sub(1);
-        return;
+        break;
       }
+      claimed_in = m.frame.load();
       r = std::move(m.ready.front());
       m.ready.pop_front();
       m.ready_keys.erase(r.key);
@@ -347,19 +353,22 @@ void BrickCache::drain_ready() {
     }
     const uint32_t slot = slots_.reserve(r.key);
     if (slot == kNoSlot) {
-      // Resident already (a blocking fetch won the race), or every slot is pinned: give the
-      // budget back; in the second case keep the brick for a later frame.
-      m.frame_uploads.fetch_sub(1);
-      m.frame_upload_bytes.fetch_sub(brick_bytes_);
-      const bool resident = slots_.contains(r.key);  // before the lock: it may spin on a writer
+      // Placed, or being placed, by another thread (a blocking fetch won the race): dropped.
+      // Or every slot of its shard is pinned: kept for a later frame. Either way the budget
+      // goes back, unless frame_begin() has renewed it since.
+      const bool taken = slots_.resident_or_reserved(r.key);
       std::lock_guard lock(m.queue_mutex);
+      if (m.frame.load() == claimed_in) {
+        m.frame_uploads.fetch_sub(1);
+        m.frame_upload_bytes.fetch_sub(brick_bytes_);
+      }
+      if (!taken) {
+        unplaced.push_back(std::move(r));
+        continue;
+      }
       m.in_flight.erase(r.key);
       notify_if_idle_locked();
-      if (resident) continue;
-      m.ready_keys.emplace(r.key, r.ticket);
-      m.ready.push_front(std::move(r));
-      m.deferred.fetch_add(1, std::memory_order_relaxed);
-      return;
+      continue;
     }
     std::memcpy(pool_.get() + size_t(slot) * brick_bytes_, r.data->data(), brick_bytes_);
     slots_.publish(slot);
@@ -371,6 +380,15 @@ void BrickCache::drain_ready() {
     m.in_flight.erase(r.key);
     notify_if_idle_locked();
   }
+  if (unplaced.empty()) return;
+  std::lock_guard lock(m.queue_mutex);
+  for (auto it = unplaced.rbegin(); it != unplaced.rend(); ++it) {
+    m.in_flight.erase(it->key);
+    m.ready_keys.emplace(it->key, it->ticket);
+    m.ready.push_front(std::move(*it));
+    m.deferred.fetch_add(1, std::memory_order_relaxed);
+  }
+  notify_if_idle_locked();
 }
 
 BrickCache::~BrickCache() {
@@ -568,10 +586,16 @@ std::optional<bool> BrickCache::visibility(const BrickKey& key) const {
 
 void BrickCache::frame_begin() {
   Impl& m = *impl_;
-  const uint64_t f = m.frame.fetch_add(1) + 1;
+  uint64_t f = 0;
+  {
+    // With the queue mutex, under which drain_ready() gives back a budget it claimed: never
+    // into the new frame's (the counters would wrap below zero).
+    std::lock_guard lock(m.queue_mutex);
+    f = m.frame.fetch_add(1) + 1;
+    m.frame_uploads.store(0);
+    m.frame_upload_bytes.store(0);
+  }
   slots_.frame(f);
-  m.frame_uploads.store(0);
-  m.frame_upload_bytes.store(0);
   drain_ready();  // bricks the last frame's budget deferred
 }
 

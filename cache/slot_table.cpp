@@ -181,6 +181,12 @@ bool SlotTable::contains(uint64_t key) const {
   }
 }
 
+bool SlotTable::resident_or_reserved(uint64_t key) const {
+  Shard& s = shard_of(key);
+  std::lock_guard lock(s.mutex);
+  return s.probe(key) || s.reserved.contains(key);
+}
+
 void SlotTable::touch(uint64_t key) { record_hit(shard_of(key), key); }
 
 uint32_t SlotTable::reserve(uint64_t key, std::optional<uint64_t>* evicted) {

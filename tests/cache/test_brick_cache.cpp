@@ -209,6 +209,38 @@ TEST_F(BrickCacheTest, ABrickLoadedAndWaitingForTheUploadBudgetIsNotRequestedAga
   EXPECT_EQ(s.uploads, uint64_t(kBricks));
 }
 
+TEST_F(BrickCacheTest, ABrickWithNoUnpinnedSlotDoesNotHoldBackTheOthers) {
+  // Pins fill one shard of the pool: a brick of that shard cannot be placed until they go, but
+  // the bricks of the other shards, queued behind it, are placed this frame all the same.
+  CacheConfig c = small_config(64, 512, store_->format().bytes());
+  c.loader_threads = 1;  // the loader serves by priority: the blocked brick first
+  BrickCache cache(*store_, c);
+  const auto keys = finest_keys(*store_);
+  std::vector<BrickHandle> pins;
+  size_t next = 0;
+  while (next < keys.size()) {
+    BrickHandle h = cache.fetch(keys[next++]);
+    const bool placed = h.slot() != kNoSlot;  // else a private copy: its shard is all pinned
+    if (placed) pins.push_back(std::move(h));
+    else break;
+  }
+  ASSERT_LT(next + 8, keys.size());
+  const BrickKey blocked = keys[next - 1];
+  cache.frame_begin();
+  cache.lookup(blocked, 10.0f);
+  for (size_t i = next; i < next + 8; ++i) cache.lookup(keys[i], 1.0f);
+  cache.frame_end();
+  cache.wait_idle();
+  EXPECT_FALSE(cache.lookup(blocked, 0, false).resident());
+  int placed = 0;
+  for (size_t i = next; i < next + 8; ++i) placed += cache.lookup(keys[i], 0, false).resident();
+  EXPECT_GT(placed, 0) << "the blocked brick held back the queue behind it";
+  pins.clear();
+  cache.frame_begin();  // the blocked brick, deferred, now finds a slot
+  EXPECT_TRUE(cache.lookup(blocked, 0, false).resident());
+  EXPECT_EQ(cache.stats().l2.hits, 1u);  // the blocked brick, which its fetch() had decoded; no other
+}
+
 TEST_F(BrickCacheTest, WaitIdleReturnsOnlyOnceEveryBrickItWasAskedForIsResident) {
   // wait_idle() promises every queued brick placed in the pool (none is held back by an
   // upload budget here). A loader thread that has decoded a brick but not yet placed it must
