@@ -153,8 +153,9 @@ struct BrickCache::Impl {
     std::atomic<uint64_t> lookups{0}, hits{0}, constant_hits{0};
   };
 
-  // Loader queue. queue_mutex guards heap, pending, in_flight, ready, ready_keys, failed,
-  // frame_requests and the request counters; the workers wait on work_cv, wait_idle() on idle_cv.
+  // Loader queue. queue_mutex guards heap, pending, in_flight, ready, blocked, ready_keys,
+  // failed, frame_requests, the request counters and every change to the per-frame upload
+  // budget (frame_end() only reads it); the workers wait on work_cv, wait_idle() on idle_cv.
   mutable std::mutex queue_mutex;
   std::condition_variable work_cv, idle_cv;
   std::priority_queue<HeapEntry> heap;
@@ -163,8 +164,12 @@ struct BrickCache::Impl {
   // flight until its loader's drain_ready() returns, and after that as deferred.
   absl::flat_hash_set<uint64_t> in_flight;
   std::deque<Ready> ready;
-  // The keys of ready (decoded, waiting for an upload budget) and their loads' tickets: requests
-  // for them are merged, and a loader leaves in_flight only for its own load of a key.
+  // Decoded bricks that no unpinned slot could take, tried again at the next frame_begin()
+  // (pins are released between frames): once a frame each, not at every drain.
+  std::deque<Ready> blocked;
+  // The keys of ready and blocked (decoded, waiting for an upload budget or a slot) and their
+  // loads' tickets: requests for them are merged, and a loader leaves in_flight only for its
+  // own load of a key.
   absl::flat_hash_map<uint64_t, uint64_t> ready_keys;
   uint64_t next_ticket = 1;  // 0: no load queued
   absl::flat_hash_map<uint64_t, std::string> failed;
@@ -267,7 +272,7 @@ void BrickCache::worker_loop() {
     const BrickKey k = BrickKey::from_code(key);
     std::string error;
     BrickBuffer data;
-    if (!slots_.contains(key)) {
+    if (!slots_.resident_or_reserved(key)) {  // else placed, or being placed by a blocking fetch
       data = l2_.find(key);
       if (!data) {
         try {
@@ -330,10 +335,6 @@ BrickBuffer BrickCache::load_from_store(const lmdb::ReadTxn& txn, const BrickKey
 void BrickCache::drain_ready() {
   Impl& m = *impl_;
   const uint64_t brick_limit = config_.upload_bricks_per_frame, byte_limit = config_.upload_bytes_per_frame;
-  // Bricks that no slot could be freed for (every slot of their shard pinned) wait aside while
-  // the rest are placed, then go back to the front for a later frame; in flight meanwhile, so
-  // that a renewed request is merged.
-  std::vector<Impl::Ready> unplaced;
   while (true) {
     Impl::Ready r;
     uint64_t claimed_in = 0;  // the frame whose budget this brick claimed
@@ -345,6 +346,8 @@ void BrickCache::drain_ready() {
         m.frame_uploads.fetch_sub(1);
         break;
       }
+      // A claim outlived by frame_begin() is charged to no frame: a frame may place one brick
+      // more than its limit for each drain under way as it begins.
       claimed_in = m.frame.load();
       r = std::move(m.ready.front());
       m.ready.pop_front();
@@ -354,19 +357,21 @@ void BrickCache::drain_ready() {
     const uint32_t slot = slots_.reserve(r.key);
     if (slot == kNoSlot) {
       // Placed, or being placed, by another thread (a blocking fetch won the race): dropped.
-      // Or every slot of its shard is pinned: kept for a later frame. Either way the budget
-      // goes back, unless frame_begin() has renewed it since.
-      const bool taken = slots_.resident_or_reserved(r.key);
+      // Or every slot of its shard is pinned: blocked until the next frame, while the bricks
+      // behind it are placed. Either way the budget goes back, unless frame_begin() has
+      // renewed it since.
+      const bool placed_elsewhere = slots_.resident_or_reserved(r.key);
       std::lock_guard lock(m.queue_mutex);
       if (m.frame.load() == claimed_in) {
         m.frame_uploads.fetch_sub(1);
         m.frame_upload_bytes.fetch_sub(brick_bytes_);
       }
-      if (!taken) {
-        unplaced.push_back(std::move(r));
-        continue;
-      }
       m.in_flight.erase(r.key);
+      if (!placed_elsewhere) {
+        m.ready_keys.emplace(r.key, r.ticket);
+        m.blocked.push_back(std::move(r));
+        m.deferred.fetch_add(1, std::memory_order_relaxed);
+      }
       notify_if_idle_locked();
       continue;
     }
@@ -380,15 +385,6 @@ void BrickCache::drain_ready() {
     m.in_flight.erase(r.key);
     notify_if_idle_locked();
   }
-  if (unplaced.empty()) return;
-  std::lock_guard lock(m.queue_mutex);
-  for (auto it = unplaced.rbegin(); it != unplaced.rend(); ++it) {
-    m.in_flight.erase(it->key);
-    m.ready_keys.emplace(it->key, it->ticket);
-    m.ready.push_front(std::move(*it));
-    m.deferred.fetch_add(1, std::memory_order_relaxed);
-  }
-  notify_if_idle_locked();
 }
 
 BrickCache::~BrickCache() {
@@ -511,7 +507,7 @@ void BrickCache::enqueue_locked(const std::vector<BrickRequest>& batch) {
       }
       continue;
     }
-    if (m.in_flight.contains(code) || m.ready_keys.contains(code) || slots_.contains(code)) {
+    if (m.in_flight.contains(code) || m.ready_keys.contains(code) || slots_.resident_or_reserved(code)) {
       ++m.merged;
       continue;
     }
@@ -594,9 +590,11 @@ void BrickCache::frame_begin() {
     f = m.frame.fetch_add(1) + 1;
     m.frame_uploads.store(0);
     m.frame_upload_bytes.store(0);
+    m.ready.insert(m.ready.begin(), std::make_move_iterator(m.blocked.begin()), std::make_move_iterator(m.blocked.end()));
+    m.blocked.clear();
   }
   slots_.frame(f);
-  drain_ready();  // bricks the last frame's budget deferred
+  drain_ready();  // bricks the last frame's budget or pins deferred
 }
 
 FrameReport BrickCache::frame_end() {

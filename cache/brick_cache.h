@@ -175,7 +175,7 @@ class BrickCache {
   std::vector<BrickRequest> frame_requests() const;
 
   /// @brief Hands staged requests to the loader and waits until it has served all of them
-  /// (uploads deferred by the budget, or for want of an unpinned slot, wait for the next
+  /// (uploads deferred by the budget, or for want of an unpinned slot, wait for a later
   /// frame_begin()).
   void wait_idle();
   CacheStats stats() const;

@@ -60,8 +60,8 @@ class SlotTable {
   uint32_t lookup_and_pin(uint64_t key);
   /// @brief Whether `key` is resident (published), without pinning or counting.
   bool contains(uint64_t key) const;
-  /// @brief Whether `key` is resident or reserved by a thread that will publish it: what a
-  /// failed reserve() means when this is true (otherwise nothing could be evicted).
+  /// @brief Whether `key` is resident or reserved (being placed by another thread), under the
+  /// shard's lock: a failed reserve() of a key for which this is false found nothing to evict.
   bool resident_or_reserved(uint64_t key) const;
   void unpin(uint32_t slot) { pins_[slot].value.fetch_sub(1, std::memory_order_release); }
   /// @brief A use without a pin (feedback): the policy hears of it like a hit.

@@ -220,24 +220,31 @@ TEST_F(BrickCacheTest, ABrickWithNoUnpinnedSlotDoesNotHoldBackTheOthers) {
   size_t next = 0;
   while (next < keys.size()) {
     BrickHandle h = cache.fetch(keys[next++]);
-    const bool placed = h.slot() != kNoSlot;  // else a private copy: its shard is all pinned
-    if (placed) pins.push_back(std::move(h));
-    else break;
+    if (h.slot() == kNoSlot) break;  // a private copy: this key's shard is all pinned
+    pins.push_back(std::move(h));
   }
   ASSERT_LT(next + 8, keys.size());
   const BrickKey blocked = keys[next - 1];
-  cache.frame_begin();
-  cache.lookup(blocked, 10.0f);
-  for (size_t i = next; i < next + 8; ++i) cache.lookup(keys[i], 1.0f);
-  cache.frame_end();
-  cache.wait_idle();
+  const auto ask = [&] {
+    cache.frame_begin();
+    cache.lookup(blocked, 10.0f);
+    for (size_t i = next; i < next + 8; ++i) cache.lookup(keys[i], 1.0f);
+    cache.frame_end();
+    cache.wait_idle();
+  };
+  ask();
   EXPECT_FALSE(cache.lookup(blocked, 0, false).resident());
-  int placed = 0;
-  for (size_t i = next; i < next + 8; ++i) placed += cache.lookup(keys[i], 0, false).resident();
-  EXPECT_GT(placed, 0) << "the blocked brick held back the queue behind it";
+  int resident = 0;
+  for (size_t i = next; i < next + 8; ++i) resident += cache.lookup(keys[i], 0, false).resident();
+  EXPECT_GT(resident, 0) << "the blocked brick held back the queue behind it";
+  const uint64_t requests = cache.stats().requests;
+  ask();  // asked again while blocked: merged, not loaded again
+  EXPECT_FALSE(cache.lookup(blocked, 0, false).resident());
+  EXPECT_EQ(cache.stats().requests, requests);
   pins.clear();
-  cache.frame_begin();  // the blocked brick, deferred, now finds a slot
+  cache.frame_begin();  // the blocked bricks now find slots
   EXPECT_TRUE(cache.lookup(blocked, 0, false).resident());
+  for (size_t i = next; i < next + 8; ++i) EXPECT_TRUE(cache.lookup(keys[i], 0, false).resident()) << keys[i];
   EXPECT_EQ(cache.stats().l2.hits, 1u);  // the blocked brick, which its fetch() had decoded; no other
 }
 
