@@ -159,7 +159,7 @@ void BM_Loader(benchmark::State& state) {
 
 const Trace& flight_trace() {
   static Trace trace = [] {
-    const int64_t n = std::getenv("BRICKYARD_BENCH_LARGE") ? 1024 : 512;
+    const int64_t n = bench::large_inputs() ? 1024 : 512;
     const std::string path = fmt::format("{}/flight-fbm{}.bytrace", bench_dir(), n);
     if (!fs::exists(path)) {
       BrickStore store(store_of("fbm", n, 32));

@@ -39,7 +39,6 @@
 #include <cstring>
 #include <memory>
 #include <random>
-#include <string>
 #include <utility>
 #include <vector>
 
@@ -313,10 +312,12 @@ struct LayoutPool {
   static int32_t tile_index(int x, int y, int z) {
     return ((((z >> 1) * kTilesY + (y >> 2)) * kTilesX + (x >> 2)) * kTileStride) | ((z & 1) << 4) | ((y & 3) << 2) | (x & 3);
   }
-  static uint16_t value(int64_t brick, int x, int y, int z) {
+  /// A brick's part of its voxels' ramp; value() adds the voxel's.
+  static int ramp_base(int64_t brick) {
     const int bx = int(brick % kBricks), by = int(brick / kBricks % kBricks), bz = int(brick / (kBricks * kBricks));
-    return uint16_t((bx * kM + x) * 7 + (by * kM + y) * 13 + (bz * kM + z) * 29);
+    return bx * kM * 7 + by * kM * 13 + bz * kM * 29;
   }
+  static uint16_t value(int base, int x, int y, int z) { return uint16_t(base + x * 7 + y * 13 + z * 29); }
 
   LayoutPool(bool tiles, bool resident_)
       : tiled(tiles), resident(resident_), brick_voxels(tiles ? kTileVoxels : kRowVoxels), slot(size_t(kBricks) * kBricks * kBricks) {
@@ -332,9 +333,10 @@ struct LayoutPool {
       for (int64_t b = b0; b < b1; ++b) {
         if (resident && b >= slots) continue;  // a resident slot holds the brick of its own index
         uint16_t* brick = voxels.get() + slot[size_t(b)] * brick_voxels;
+        const int base = ramp_base(b);
         for (int z = 0; z < kEdge; ++z)
           for (int y = 0; y < kEdge; ++y)
-            for (int x = 0; x < kEdge; ++x) brick[tiled ? tile_index(x, y, z) : row_index(x, y, z)] = value(b, x, y, z);
+            for (int x = 0; x < kEdge; ++x) brick[tiled ? tile_index(x, y, z) : row_index(x, y, z)] = value(base, x, y, z);
       }
     });
   }
@@ -386,7 +388,7 @@ struct LayoutPool {
       corners(brick, cell, corner);
       for (int c = 0; c < 8; ++c)
         for (int k = 0; k < 8; ++k)
-          if (corner[c][k] != float(value(0, cell[0][k] + (c & 1), cell[1][k] + (c >> 1 & 1), cell[2][k] + (c >> 2)))) return false;
+          if (corner[c][k] != float(value(ramp_base(0), cell[0][k] + (c & 1), cell[1][k] + (c >> 1 & 1), cell[2][k] + (c >> 2)))) return false;
     }
     return true;
   }
@@ -517,8 +519,7 @@ void brick_layout_benchmark(benchmark::State& state, bool tiled, bool resident, 
 
 /// Last, and only with BRICKYARD_BENCH_LARGE=1: the large pools take 2.6 and 2.9 GB.
 void register_brick_layout() {
-  const char* large = std::getenv("BRICKYARD_BENCH_LARGE");
-  if (!large || std::string(large) != "1") return;
+  if (!brickyard::bench::large_inputs()) return;
   for (bool tiled : {false, true})
     for (bool resident : {false, true})
       for (int step : {1, 2, 16})

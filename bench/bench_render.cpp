@@ -79,7 +79,7 @@ void register_all() {
     double lo, hi;
   };
   std::vector<Input> inputs = {{"ml256f32", "marschner-lobb", 256, ValueType::f32, 0.0, 1.0}};
-  if (std::getenv("BRICKYARD_BENCH_LARGE")) inputs.push_back({"fbm512u8", "fbm", 512, ValueType::u8, 0.0, 255.0});
+  if (bench::large_inputs()) inputs.push_back({"fbm512u8", "fbm", 512, ValueType::u8, 0.0, 255.0});
   for (const Input& in : inputs) {
     const std::string store = store_of(in.field, in.n, in.type);
     for (const char* backend : {"raymarch", "reference"})

@@ -201,7 +201,7 @@ void BM_RandomRead(benchmark::State& state, ValueType type) {
 }
 
 void register_all() {
-  const bool large = std::getenv("BRICKYARD_BENCH_LARGE") != nullptr;
+  const bool large = bench::large_inputs();
   for (ValueType t : {ValueType::u8, ValueType::u16, ValueType::f32}) {
     auto* b = benchmark::RegisterBenchmark(fmt::format("Import/fbm/{}", to_string(t)).c_str(), BM_Import, "fbm", t);
     for (int64_t n : {int64_t(512), int64_t(1024)}) {

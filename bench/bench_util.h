@@ -18,6 +18,10 @@ inline std::string bench_dir() {
   return dir;
 }
 
+/// @brief Whether $BRICKYARD_BENCH_LARGE is set: the programs then add their large inputs
+/// (1024^3 stores, gigabyte pools) to the default ones.
+inline bool large_inputs() { return std::getenv("BRICKYARD_BENCH_LARGE") != nullptr; }
+
 inline int run_benchmarks(int argc, char** argv, void (*register_all)()) {
   register_all();
   benchmark::Initialize(&argc, argv);

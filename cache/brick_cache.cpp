@@ -306,9 +306,10 @@ void BrickCache::worker_loop() {
   }
 }
 
+bool BrickCache::idle_locked() const { return impl_->pending.empty() && impl_->in_flight.empty(); }
+
 void BrickCache::notify_if_idle_locked() {
-  Impl& m = *impl_;
-  if (m.pending.empty() && m.in_flight.empty()) m.idle_cv.notify_all();
+  if (idle_locked()) impl_->idle_cv.notify_all();
 }
 
 BrickBuffer BrickCache::load_from_store(const lmdb::ReadTxn& txn, const BrickKey& key) {
@@ -657,7 +658,7 @@ void BrickCache::wait_idle() {
   }
   m.work_cv.notify_all();
   std::unique_lock lock(m.queue_mutex);
-  m.idle_cv.wait(lock, [&] { return m.pending.empty() && m.in_flight.empty(); });
+  m.idle_cv.wait(lock, [&] { return idle_locked(); });
 }
 
 BrickHandle BrickCache::resident_handle(const BrickKey& key, uint32_t slot) {

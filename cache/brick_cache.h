@@ -196,7 +196,9 @@ class BrickCache {
   void enqueue_locked(const std::vector<BrickRequest>& batch);
   /// Uploads loaded bricks into the pool while this frame's budget allows.
   void drain_ready();
-  /// Wakes wait_idle() when nothing is queued or in flight; the caller holds the queue mutex.
+  /// Whether nothing is queued or in flight; the caller holds the queue mutex.
+  bool idle_locked() const;
+  /// Wakes wait_idle() when idle_locked().
   void notify_if_idle_locked();
 
   const BrickStore& store_;

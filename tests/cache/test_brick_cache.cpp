@@ -62,6 +62,24 @@ CacheConfig small_config(uint32_t slots, uint64_t l2_bricks, uint64_t brick_byte
   return c;
 }
 
+/// One frame of a renderer's lookups (its misses become requests), then the loader waited for:
+/// how many were resident when looked up.
+int ask_one_frame(BrickCache& cache, const std::vector<BrickRequest>& asked) {
+  cache.frame_begin();
+  int resident = 0;
+  for (const BrickRequest& r : asked) resident += cache.lookup(r.key, r.priority).resident();
+  cache.frame_end();
+  cache.wait_idle();
+  return resident;
+}
+
+/// How many of `asked` are resident now (looked up without requesting).
+int resident_now(BrickCache& cache, const std::vector<BrickRequest>& asked) {
+  int resident = 0;
+  for (const BrickRequest& r : asked) resident += cache.lookup(r.key, 0, false).resident();
+  return resident;
+}
+
 TEST_F(BrickCacheTest, FetchReturnsTheDecodedBrickPinnedInTheePool) {
   BrickCache cache(*store_, small_config(16, 64, store_->format().bytes()));
   const auto keys = finest_keys(*store_);
@@ -194,14 +212,10 @@ TEST_F(BrickCacheTest, ABrickLoadedAndWaitingForTheUploadBudgetIsNotRequestedAga
   BrickCache cache(*store_, c);
   const auto keys = finest_keys(*store_);
   constexpr int kBricks = 16;
+  std::vector<BrickRequest> asked;
+  for (int i = 0; i < kBricks; ++i) asked.push_back({keys[size_t(i)], 1.0f});
   int frames = 0;
-  for (bool all_resident = false; !all_resident && frames < 10; ++frames) {
-    cache.frame_begin();
-    all_resident = true;
-    for (int i = 0; i < kBricks; ++i) all_resident &= cache.lookup(keys[size_t(i)], 1.0f).resident();
-    cache.frame_end();
-    cache.wait_idle();
-  }
+  for (bool all_resident = false; !all_resident && frames < 10; ++frames) all_resident = ask_one_frame(cache, asked) == kBricks;
   EXPECT_EQ(frames, kBricks / 4);  // a budget's worth a frame: the last frame sees them all
   const CacheStats s = cache.stats();
   EXPECT_EQ(s.requests, uint64_t(kBricks));
@@ -225,20 +239,14 @@ TEST_F(BrickCacheTest, ABrickWithNoUnpinnedSlotDoesNotHoldBackTheOthers) {
   }
   ASSERT_LT(next + 8, keys.size());
   const BrickKey blocked = keys[next - 1];
-  const auto ask = [&] {
-    cache.frame_begin();
-    cache.lookup(blocked, 10.0f);
-    for (size_t i = next; i < next + 8; ++i) cache.lookup(keys[i], 1.0f);
-    cache.frame_end();
-    cache.wait_idle();
-  };
-  ask();
+  std::vector<BrickRequest> others, asked{{blocked, 10.0f}};
+  for (size_t i = next; i < next + 8; ++i) others.push_back({keys[i], 1.0f});
+  asked.insert(asked.end(), others.begin(), others.end());
+  ask_one_frame(cache, asked);
   EXPECT_FALSE(cache.lookup(blocked, 0, false).resident());
-  int resident = 0;
-  for (size_t i = next; i < next + 8; ++i) resident += cache.lookup(keys[i], 0, false).resident();
-  EXPECT_GT(resident, 0) << "the blocked brick held back the queue behind it";
+  EXPECT_GT(resident_now(cache, others), 0) << "the blocked brick held back the queue behind it";
   const uint64_t requests = cache.stats().requests;
-  ask();  // asked again while blocked: merged, not loaded again
+  ask_one_frame(cache, asked);  // asked again while blocked: merged, not loaded again
   EXPECT_FALSE(cache.lookup(blocked, 0, false).resident());
   EXPECT_EQ(cache.stats().requests, requests);
   pins.clear();
@@ -264,12 +272,11 @@ TEST_F(BrickCacheTest, WaitIdleReturnsOnlyOnceEveryBrickItWasAskedForIsResident)
   ASSERT_GT(keys.size(), kBatch + c.l1_slots);  // batches that come back after the pool has turned over
   int early = 0;
   for (size_t round = 0; round < 600; ++round) {
-    cache.frame_begin();
     const size_t first = round * kBatch % (keys.size() - kBatch);
-    for (size_t i = first; i < first + kBatch; ++i) cache.lookup(keys[i], 1.0f);
-    cache.frame_end();
-    cache.wait_idle();
-    for (size_t i = first; i < first + kBatch; ++i) early += !cache.lookup(keys[i], 0, false).resident();
+    std::vector<BrickRequest> batch;
+    for (size_t i = first; i < first + kBatch; ++i) batch.push_back({keys[i], 1.0f});
+    ask_one_frame(cache, batch);
+    early += int(kBatch) - resident_now(cache, batch);
   }
   EXPECT_EQ(early, 0) << "bricks not yet resident when wait_idle() returned";
   EXPECT_GT(cache.stats().l2.hits, 0u);  // the short loads from L2 were taken
