@@ -23,6 +23,8 @@
 #include "core/plot.h"
 #include "core/raw_volume.h"
 #include "core/units.h"
+#include "session/grid_cache.h"
+#include "storage/store.h"
 
 namespace brickyard::cli {
 namespace {
@@ -35,6 +37,7 @@ struct CachebenchOptions {
   std::string sizes = "1%,2%,5%,10%,20%,50%";
   std::string convert, to = "brickyard";
   std::string csv, plot;
+  std::string kind;  ///< replay only this record kind's accesses ("": every kind, each (kind, key) an object)
   bool windows = false;
 };
 
@@ -109,9 +112,10 @@ void write_plot(const std::string& png, const std::string& csv_for_plot, const s
 void run_cachebench(const CachebenchOptions& o) {
   if (o.trace.empty() == o.synthetic.empty())
     throw Error(Errc::invalid_argument, "give a TRACE file or --synthetic (one of them)").with_field("TRACE");
-  const Trace trace = !o.synthetic.empty() ? synthetic_trace(o.synthetic)
-                      : o.format.empty()   ? read_trace(o.trace)
-                                           : read_trace(o.trace, parse_trace_format(o.format));
+  Trace trace = !o.synthetic.empty() ? synthetic_trace(o.synthetic)
+                : o.format.empty()   ? read_trace(o.trace)
+                                     : read_trace(o.trace, parse_trace_format(o.format));
+  if (!o.kind.empty()) trace = trace.of_kind(record_kind_from_string(o.kind, "--kind"));
   if (!o.convert.empty()) {
     write_trace(o.convert, trace, parse_trace_format(o.to));
     std::cout << fmt::format("wrote {} ({} records, {} format)\n", o.convert, trace.records.size(), o.to);
@@ -131,6 +135,15 @@ void run_cachebench(const CachebenchOptions& o) {
   std::cout << fmt::format("trace {}: {} requests, {} prefetch fills, {} objects, working set {}, {} frames\n", name,
                            format_count(double(demand)), format_count(double(fills)), format_count(double(trace.unique_objects())),
                            format_bytes(double(working_set)), trace.frames());
+  if (const std::vector<RecordKind> kinds = trace.record_kinds(); kinds.size() > 1 || (kinds.size() == 1 && kinds[0] != RecordKind::brick)) {
+    std::string line;
+    for (RecordKind k : kinds) {
+      const Trace part = trace.of_kind(k);
+      line += fmt::format("{}{} {} objects ({})", line.empty() ? "" : ", ", to_string(k), format_count(double(part.unique_objects())),
+                          format_bytes(double(part.unique_bytes())));
+    }
+    std::cout << "  record kinds: " << line << (kinds.size() > 1 ? " (replayed together; --kind replays one)" : "") << "\n";
+  }
 
   const std::vector<uint64_t> next = next_demand_access(trace);
   std::vector<ReplayResult> results(policies.size() * sizes.size());
@@ -223,7 +236,7 @@ struct FlightCliOptions {
 };
 
 void run_flight(const FlightCliOptions& o) {
-  BrickStore store(o.store);
+  Store store(o.store);
   CacheConfig c;
   c.l1_bytes = parse_bytes(o.l1, "--l1");
   c.l2_bytes = parse_bytes(o.l2, "--l2");
@@ -238,7 +251,8 @@ void run_flight(const FlightCliOptions& o) {
   f.frames = o.frames;
   std::string stats_json;
   {
-    BrickCache cache(store, c);
+    GridCache grid_cache(store, c);
+    BrickCache& cache = grid_cache.bricks();
     std::cout << fmt::format("flight over {} ({} levels, {} L1 slots, L2 {}), {} frames at {}x{}\n", o.store,
                              store.layout().levels, cache.pool_slots(), format_bytes(double(c.l2_bytes)),
                              f.frames ? f.frames : path.frames, path.width, path.height);
@@ -292,7 +306,7 @@ void add_cache_commands(CLI::App& app) {
   auto* cmd = app.add_subcommand("cachebench", "Replay an access trace against cache policies and sizes");
   cmd->add_option("TRACE", o->trace,
                   "Trace file: brickyard (.bytrace, from a cache's trace_path), libCacheSim oracleGeneral "
-                  "(.oracleGeneral), or text (.txt: 'key size' per line)");
+                  "(.oracleGeneral), or text (.txt: 'key size [kind]' per line)");
   cmd->add_option("--format", o->format, "Input format when the name does not say: brickyard, oracleGeneral, text");
   cmd->add_option("--synthetic", o->synthetic,
                   "Generate instead of reading: zipf:objects=N,requests=M,alpha=A,seed=S | scan:objects=N,passes=P | "
@@ -301,6 +315,7 @@ void add_cache_commands(CLI::App& app) {
   cmd->add_option("--sizes", o->sizes, "Comma-separated sizes: N% of the working set or bytes (64MiB)")->capture_default_str();
   cmd->add_option("--csv", o->csv, "Write every result (and the miss ratio over time) as CSV");
   cmd->add_option("--plot", o->plot, "Draw the miss-ratio curves with gnuplot into this PNG (its CSV goes next to it)");
+  cmd->add_option("--kind", o->kind, "Replay only this record kind's accesses: brick, octree_page, tet_cluster");
   cmd->add_flag("--windows", o->windows, "Print the miss ratio over time (frame windows) at the smallest size");
   cmd->add_option("--convert", o->convert, "Write the trace to this file in --to format instead of replaying it");
   cmd->add_option("--to", o->to, "Format for --convert: brickyard, oracleGeneral, text")->capture_default_str();

@@ -16,9 +16,9 @@
 #include "core/raw_volume.h"
 #include "core/timing.h"
 #include "core/units.h"
-#include "renderers/common/bench_report.h"
+#include "report/bench_report.h"
 #include "renderers/common/metrics.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 
 namespace brickyard::cli {
 namespace fs = std::filesystem;
@@ -76,10 +76,11 @@ struct RenderOptions {
 };
 
 void print_backends() {
-  for (const BackendEntry& e : builtin_backends().entries()) {
-    std::string modes;
+  for (const BackendEntry& e : backends().entries()) {
+    std::string modes, kinds;
     for (RenderMode m : e.info.modes) modes += fmt::format("{}{}", modes.empty() ? "" : ",", to_string(m));
-    std::cout << fmt::format("{}  ({})\n    {}\n", e.info.name, modes, e.info.description);
+    for (DataKind k : e.info.kinds) kinds += fmt::format("{}{}", kinds.empty() ? "" : ",", to_string(k));
+    std::cout << fmt::format("{}  ({}; {})\n    {}\n", e.info.name, modes, kinds, e.info.description);
     for (const BackendParam& p : e.info.params)
       std::cout << fmt::format("    {:<10} default {:<8g} [{:g}, {:g}]  {}\n", p.name, p.default_value, p.lo, p.hi, p.doc);
     if (!e.info.quality_param.empty()) {
@@ -180,7 +181,7 @@ void run_render(const RenderOptions& o) {
     j["backend"] = session.backend().name;
     j["params"] = session.params().values();
     j["frames"] = all;
-    j["cache"] = nlohmann::json::parse(session.cache().stats().to_json());
+    j["cache"] = nlohmann::json::parse(session.pages().stats().to_json());
     write_text(o.stats, j.dump(2) + "\n");
   }
 }
@@ -256,6 +257,7 @@ void run_bench(const BenchOptions& o) {
     scene.height = scene.camera.height = int(wh[1]);
   }
   const int frame = parse_frames(o.frame, scene.frames()).front();
+  const DataKind kind = read_manifest(scene.dataset).kind;
   const int supersample = o.reference_supersample;
   if (supersample < 1 || supersample % 2 == 0)
     throw Error(Errc::invalid_argument,
@@ -278,16 +280,16 @@ void run_bench(const BenchOptions& o) {
 
   std::vector<std::string> names;
   if (o.backends == "all") {
-    for (const BackendEntry& e : builtin_backends().entries())
-      if (e.info.name != "reference" && e.info.accepts(DataKind::structured, scene.mode)) names.push_back(e.info.name);
+    for (const BackendEntry& e : backends().entries())
+      if (e.info.name != "reference" && e.info.accepts(kind, scene.mode)) names.push_back(e.info.name);
   } else {
     names = split_list(o.backends);
-    for (const auto& n : names) builtin_backends().find(n);  // unknown names fail before any rendering
+    for (const auto& n : names) backends().find(n);  // unknown names fail before any rendering
   }
   // A swept parameter that none of these back ends declares is a misspelling, not a no-op.
   for (const auto& [param, vals] : sweeps) {
     const bool declared = std::any_of(names.begin(), names.end(), [&](const std::string& n) {
-      const std::vector<BackendParam>& params = builtin_backends().find(n).info.params;
+      const std::vector<BackendParam>& params = backends().find(n).info.params;
       return std::any_of(params.begin(), params.end(), [&](const BackendParam& p) { return p.name == param; });
     });
     if (!declared)
@@ -336,9 +338,10 @@ void run_bench(const BenchOptions& o) {
     report.rows.push_back(row);
   }
   for (const std::string& name : names) {
-    const BackendInfo& info = builtin_backends().find(name).info;
-    if (!info.accepts(DataKind::structured, scene.mode)) {
-      std::cout << fmt::format("  {} does not render {} mode: skipped\n", name, to_string(scene.mode));
+    const BackendInfo& info = backends().find(name).info;
+    if (!info.accepts(kind, scene.mode)) {
+      std::cout << fmt::format("  {} does not render {} mode on {} datasets: skipped\n", name, to_string(scene.mode),
+                               to_string(kind));
       continue;
     }
     std::vector<double> values = info.quality_sweep;

@@ -22,7 +22,7 @@
 #include "preprocess/builder.h"
 #include "preprocess/export.h"
 #include "preprocess/volume_source.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 
 namespace brickyard::cli {
 namespace {
@@ -163,14 +163,33 @@ std::string sparkline(const Histogram& h, int width) {
   return out;
 }
 
+void print_mesh_info(const std::string& path, const Store& store) {
+  const Manifest& m = store.manifest();
+  const MeshSummary& mesh = m.mesh;
+  std::cout << fmt::format("store {}: {}, tetrahedral mesh, format version {}\n", path,
+                           m.complete ? "complete" : "INCOMPLETE (build interrupted)", m.format_version);
+  std::cout << fmt::format("{} tetrahedra, {} vertices in {} clusters, pages of {}, {} time step{}\n", mesh.tets,
+                           mesh.vertices, mesh.clusters, format_bytes(double(mesh.page_bytes)), m.time_steps,
+                           m.time_steps == 1 ? "" : "s");
+  std::cout << fmt::format("bounds ({:g}, {:g}, {:g}) - ({:g}, {:g}, {:g}), values [{:g}, {:g}]\n", mesh.bounds.lo.x,
+                           mesh.bounds.lo.y, mesh.bounds.lo.z, mesh.bounds.hi.x, mesh.bounds.hi.y, mesh.bounds.hi.z,
+                           m.min_value, m.max_value);
+  if (!m.complete) return;
+  std::cout << fmt::format("cluster table {}, {} cluster records\n", format_bytes(double(store.clusters().size() * sizeof(TetCluster))),
+                           store.record_count());
+  std::cout << "source " << nlohmann::json::parse(m.source).dump() << "\n";
+  std::cout << "build  " << nlohmann::json::parse(m.build).dump() << "\n";
+}
+
 void run_info(const std::string& path, bool json) {
-  BrickStore store(path, {.allow_incomplete = true});
+  Store store(path, {.allow_incomplete = true});
   const Manifest& m = store.manifest();
   if (json) {
     std::cout << m.to_json() << '\n';
     return;
   }
-  const StoreLayout& l = store.layout();
+  if (store.kind() == DataKind::tetrahedral) return print_mesh_info(path, store);
+  const GridLayout& l = store.layout();
   const BrickFormat& f = m.format;
   std::cout << fmt::format("store {}: {}, format version {}\n", path, m.complete ? "complete" : "INCOMPLETE (build interrupted)",
                            m.format_version);
@@ -217,13 +236,58 @@ void run_info(const std::string& path, bool json) {
 
 // ----------------------------------------------------------------------------------- verify
 
+/// A mesh store: every cluster page decodes (checksum, sizes), matches its table entry, and its
+/// vertices and values lie within the entry's bounds and range.
+int verify_mesh(const std::string& path, const Store& store) {
+  const std::vector<TetCluster>& clusters = store.clusters();
+  std::mutex bad_mutex;
+  std::vector<std::pair<uint64_t, std::string>> bad;
+  auto report = [&](uint64_t c, std::string why) {
+    std::lock_guard lock(bad_mutex);
+    bad.emplace_back(c, std::move(why));
+  };
+  if (store.record_count() != clusters.size())
+    report(clusters.size(), fmt::format("{} cluster records for {} clusters", store.record_count(), clusters.size()));
+  Progress progress("verify", clusters.size(), "clusters");
+  parallel_for<size_t>(0, clusters.size(), 16, [&](size_t c0, size_t c1) {
+    auto txn = store.begin_read();
+    std::vector<std::byte> page(size_t(store.manifest().mesh.page_bytes));
+    for (size_t c = c0; c < c1; ++c) {
+      try {
+        store.read_page(txn, {RecordKind::tet_cluster, c}, page);
+        const TetClusterPage p = TetClusterPage::view(page);
+        const TetCluster& e = clusters[c];
+        for (uint32_t v = 0; v < p.vertex_count; ++v) {
+          for (int a = 0; a < 3; ++a)
+            if (!(p.positions[3 * v + a] >= e.lo[a] && p.positions[3 * v + a] <= e.hi[a])) {
+              report(c, fmt::format("vertex {} lies outside the cluster's bounds", v));
+              break;
+            }
+          if (!(p.values[v] >= e.min && p.values[v] <= e.max)) report(c, fmt::format("value {} of vertex {} is outside [{}, {}]", p.values[v], v, e.min, e.max));
+        }
+        for (size_t i = 0; i < 4 * size_t(p.tet_count); ++i)
+          if (p.corners[i] >= p.vertex_count) report(c, fmt::format("tetrahedron {} names vertex {} of {}", i / 4, p.corners[i], p.vertex_count));
+      } catch (const Error& e) {
+        report(c, e.message());
+      }
+    }
+    progress.advance(c1 - c0);
+  });
+  progress.finish();
+  std::sort(bad.begin(), bad.end());
+  for (const auto& [c, why] : bad) std::cout << fmt::format("BAD cluster {}: {}\n", c, why);
+  std::cout << fmt::format("{}: {} clusters decoded, {} problems\n", path, clusters.size(), bad.size());
+  return bad.empty() ? 0 : 1;
+}
+
 int run_verify(const std::string& path) {
-  BrickStore store(path, {.allow_incomplete = true});
+  Store store(path, {.allow_incomplete = true});
   if (!store.manifest().complete) {
     std::cout << fmt::format("{}: INCOMPLETE: the build was interrupted; nothing else checked\n", path);
     return 1;
   }
-  const StoreLayout& l = store.layout();
+  if (store.kind() == DataKind::tetrahedral) return verify_mesh(path, store);
+  const GridLayout& l = store.layout();
   const BrickFormat& f = store.format();
   std::mutex bad_mutex;
   std::vector<std::pair<BrickKey, std::string>> bad;
@@ -300,7 +364,10 @@ int run_verify(const std::string& path) {
 
 void run_export(const std::string& path, int level, const std::string& box_text, const std::string& out,
                 const std::string& grid) {
-  BrickStore store(path);
+  Store store(path);
+  if (store.kind() != DataKind::structured)
+    throw Error(Errc::unsupported, fmt::format("export writes grids; this store holds a {} dataset", to_string(store.kind())))
+        .with_file(path);
   std::optional<VoxelBox> box;
   if (!box_text.empty()) {
     const auto v = parse_int_list(box_text, 6, "--box");

@@ -10,6 +10,7 @@
 #include "apps/commands.h"
 #include "core/error.h"
 #include "core/progress.h"
+#include "session/modules.h"
 
 int main(int argc, char** argv) {
   using namespace brickyard;
@@ -19,6 +20,10 @@ int main(int argc, char** argv) {
   cli::GlobalOptions global;
   app.add_flag("-q,--quiet", global.quiet, "No progress output");
   app.add_option("-j,--threads", global.threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 4096));
+  std::vector<std::string> modules;
+  app.add_option("--module", modules,
+                 "Load a back-end module (a shared library built against the installed package; repeatable; "
+                 "BRICKYARD_MODULES adds more, separated by ':')");
 
   cli::add_generate_command(app, global);
   cli::add_version_command(app);
@@ -33,6 +38,9 @@ int main(int argc, char** argv) {
     if (global.threads > 0)
       thread_limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                            size_t(global.threads));
+    // Before any subcommand runs: a module's back ends are chosen by name like the built-in ones.
+    for (const std::string& path : modules_from_environment()) load_module(path);
+    for (const std::string& path : modules) load_module(path);
   });
 
   try {

@@ -23,6 +23,7 @@
 #include <fmt/format.h>
 
 #include "cache/brick_cache.h"
+#include "session/grid_cache.h"
 #include "cache/flight.h"
 #include "cache/policy.h"
 #include "cache/replay.h"
@@ -46,7 +47,7 @@ std::string store_of(const std::string& field, int64_t n, int brick) {
   return dir;
 }
 
-std::vector<BrickKey> payload_keys(const BrickStore& s, int level) {
+std::vector<BrickKey> payload_keys(const Store& s, int level) {
   std::vector<BrickKey> keys;
   for (int64_t i = 0; i < s.layout().brick_count(level); ++i) {
     const BrickKey k = s.layout().key_at(level, i);
@@ -58,8 +59,8 @@ std::vector<BrickKey> payload_keys(const BrickStore& s, int level) {
 // ------------------------------------------------------------------------------- hit path
 
 struct HitFixture {
-  std::unique_ptr<BrickStore> store;
-  std::unique_ptr<BrickCache> cache;
+  std::unique_ptr<Store> store;
+  std::unique_ptr<GridCache> cache;
   std::vector<BrickKey> keys;
 };
 
@@ -70,14 +71,14 @@ HitFixture& hit_fixture(const std::string& policy) {
   auto& f = fixtures[policy];
   if (!f) {
     f = std::make_unique<HitFixture>();
-    f->store = std::make_unique<BrickStore>(store_of("fbm", 256, 16));
+    f->store = std::make_unique<Store>(store_of("fbm", 256, 16));
     f->keys = payload_keys(*f->store, f->store->layout().finest());
     CacheConfig c;
     c.l1_slots = uint32_t(f->keys.size() * 2);  // shards fill unevenly: headroom so every key stays resident
     c.l2_bytes = f->store->format().bytes() * 64;
     c.l1_policy = policy;
-    f->cache = std::make_unique<BrickCache>(*f->store, c);
-    for (const auto& k : f->keys) f->cache->fetch(k);  // everything resident: every lookup hits
+    f->cache = std::make_unique<GridCache>(*f->store, c);
+    for (const auto& k : f->keys) f->cache->bricks().fetch(k);  // everything resident: every lookup hits
   }
   return *f;
 }
@@ -105,7 +106,7 @@ void BM_HitPath(benchmark::State& state, const std::string& policy) {
         uint64_t n = 0, m = 0;
         while (std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(200))
           for (int i = 0; i < 1024; ++i) {
-            BrickHandle h = f.cache->lookup(f.keys[order[n++ & 0xffff]], 0, false);
+            BrickHandle h = f.cache->bricks().lookup(f.keys[order[n++ & 0xffff]], 0, false);
             m += !h.resident();
             benchmark::DoNotOptimize(h.bytes());
           }
@@ -132,7 +133,7 @@ void BM_HitPath(benchmark::State& state, const std::string& policy) {
 // --------------------------------------------------------------------------------- loader
 
 void BM_Loader(benchmark::State& state) {
-  BrickStore store(store_of("fbm", 512, 32));
+  Store store(store_of("fbm", 512, 32));
   const auto keys = payload_keys(store, store.layout().finest());
   uint64_t bytes = 0;
   for (auto _ : state) {
@@ -141,12 +142,12 @@ void BM_Loader(benchmark::State& state) {
     c.l2_bytes = store.format().bytes() * 64;
     c.loader_threads = int(state.range(0));
     state.PauseTiming();  // allocating and faulting in the pool is not loading
-    auto cache = std::make_unique<BrickCache>(store, c);
+    auto cache = std::make_unique<GridCache>(store, c);
     state.ResumeTiming();
-    cache->frame_begin();
-    for (const auto& k : keys) cache->request(k, 1);
-    cache->wait_idle();
-    bytes += cache->stats().l3_bytes_decoded;
+    cache->bricks().frame_begin();
+    for (const auto& k : keys) cache->bricks().request(k, 1);
+    cache->bricks().wait_idle();
+    bytes += cache->bricks().stats().l3_bytes_decoded;
     state.PauseTiming();  // the cache's destruction is not loading
     cache.reset();
     state.ResumeTiming();
@@ -162,13 +163,13 @@ const Trace& flight_trace() {
     const int64_t n = bench::large_inputs() ? 1024 : 512;
     const std::string path = fmt::format("{}/flight-fbm{}.bytrace", bench_dir(), n);
     if (!fs::exists(path)) {
-      BrickStore store(store_of("fbm", n, 32));
+      Store store(store_of("fbm", n, 32));
       CacheConfig c;
       c.l1_bytes = uint64_t(256) << 20;
       c.l2_bytes = uint64_t(1) << 30;
       c.trace_path = path;
-      BrickCache cache(store, c);
-      fly(cache, CameraPath::load(BRICKYARD_SOURCE_DIR "/scenes/flight-orbit.json"), {});
+      GridCache cache(store, c);
+      fly(cache.bricks(), CameraPath::load(BRICKYARD_SOURCE_DIR "/scenes/flight-orbit.json"), {});
     }
     return read_trace(path);
   }();

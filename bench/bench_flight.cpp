@@ -24,7 +24,7 @@
 #include "apps/parse.h"
 #include "core/error.h"
 #include "renderers/common/metrics.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 #include "renderers/common/scene.h"
 
 namespace {
@@ -112,7 +112,7 @@ int run(const Options& o) {
     int n = 0;
     do {
       jump_ms.push_back(fresh.render(int(ab[1]), fb, {}).seconds * 1e3);
-      fresh.cache().wait_idle();
+      fresh.pages().wait_idle();
     } while (!fresh.converged() && ++n < 200);
     fmt::print("jump {} -> {}: {} frames to converge ({}), first {:.1f} ms, max {:.1f} ms\n", ab[0], ab[1], jump_ms.size(),
                fresh.converged() ? "converged" : "NOT converged", jump_ms.front(), pct(jump_ms, 100));

@@ -24,7 +24,7 @@
 
 #include "bench_util.h"
 #include "renderers/gobbetti/spatial_index.h"
-#include "storage/layout.h"
+#include "dataset/grid.h"
 
 namespace {
 
@@ -33,8 +33,8 @@ using gobbetti::CutLeaf;
 using gobbetti::LeafVisit;
 using gobbetti::SpatialIndex;
 
-const StoreLayout& bench_layout() {
-  static const StoreLayout layout = StoreLayout::make(Vec3s(2048), 32);
+const GridLayout& bench_layout() {
+  static const GridLayout layout = GridLayout::make(Vec3s(2048), 32);
   return layout;
 }
 
@@ -44,7 +44,7 @@ const Vec3d kTarget(1024, 1024, 1024);
 /// Greedy view-dependent refinement: split the leaf with the largest size/distance until the
 /// cut has `target` leaves; shuffled, since the renderer's order is not the index's.
 std::vector<CutLeaf> view_cut(size_t target) {
-  const StoreLayout& layout = bench_layout();
+  const GridLayout& layout = bench_layout();
   const double M = layout.brick_size;
   auto priority = [&](const BrickKey& k) {
     const double s = std::ldexp(M, layout.finest() - int(k.level));

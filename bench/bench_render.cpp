@@ -18,7 +18,7 @@
 #include "fields/field.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 
 namespace {
 

@@ -27,7 +27,7 @@
 #include "fields/grid.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 
 namespace {
 
@@ -97,7 +97,7 @@ struct BrickSet {
 };
 
 BrickSet brick_set(const std::string& field, ValueType type, size_t count) {
-  BrickStore store(store_of(field, 256, type));
+  Store store(store_of(field, 256, type));
   BrickSet set{store.format(), {}, {}};
   auto txn = store.begin_read();
   store.for_each_record(txn, [&](const BrickKey& k, std::span<const std::byte> r) {
@@ -176,9 +176,9 @@ void BM_Compression(benchmark::State& state, const std::string& field, ValueType
 }
 
 void BM_RandomRead(benchmark::State& state, ValueType type) {
-  BrickStore store(store_of("fbm", 256, type));
+  Store store(store_of("fbm", 256, type));
   std::vector<BrickKey> keys;
-  const StoreLayout& l = store.layout();
+  const GridLayout& l = store.layout();
   for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
     const BrickKey k = l.key_at(l.finest(), i);
     if (store.nodes().at(k).has_payload()) keys.push_back(k);

@@ -7,31 +7,12 @@
 
 namespace brickyard {
 
-Box3d brick_world_box(const StoreLayout& layout, const Manifest& m, const BrickKey& key) {
-  const double scale = double(int64_t(1) << layout.steps(int(key.level)));
-  const double M = layout.brick_size;
-  Box3d box;
-  for (int a = 0; a < 3; ++a) {
-    const double lo = double(key.coords()[a]) * M * scale;
-    const double hi = std::min(double(layout.dims[a] - 1), (double(key.coords()[a]) + 1) * M * scale);
-    box.lo[a] = m.origin[a] + std::min(lo, hi) * m.spacing[a];
-    box.hi[a] = m.origin[a] + hi * m.spacing[a];
-  }
-  return box;
-}
-
-double brick_voxel_pixels(const StoreLayout& layout, const Manifest& manifest, const Camera& cam, const BrickKey& key,
-                          const Box3d& world_box, int height) {
-  const double voxel = max_component(manifest.spacing) * double(int64_t(1) << layout.steps(int(key.level)));
-  return cam.projected_pixels(voxel, distance(world_box, cam.eye), height);
-}
-
 std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const FlightOptions& options,
                              const std::function<void(const FlightFrame&)>& on_frame) {
-  const StoreLayout& layout = cache.layout();
-  const Manifest& manifest = cache.store().manifest();
-  const NodeTable& nodes = cache.nodes();
-  const Box3d world{manifest.origin, manifest.origin + manifest.spacing * Vec3d(layout.dims - Vec3s(1))};
+  const GridView& grid = cache.grid();
+  const GridLayout& layout = grid.layout();
+  const NodeTable& nodes = grid.nodes();
+  const Box3d world = grid.world_box();
   const int frames = options.frames > 0 ? options.frames : path.frames;
   std::vector<FlightFrame> out;
 
@@ -59,12 +40,12 @@ std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const Fl
       const BrickKey k = stack.back();
       stack.pop_back();
       ++report.nodes_visited;
-      const Box3d box = brick_world_box(layout, manifest, k);
+      const Box3d box = grid.brick_world_box(k);
       if (!cam.may_see(box, path.width, path.height)) continue;
       const NodeRecord& n = nodes.at(k);
       if (n.is_constant()) continue;  // renderers integrate constant nodes analytically
       const double d = distance(box, cam.eye);
-      const double pixels = brick_voxel_pixels(layout, manifest, cam, k, box, path.height);
+      const double pixels = grid.brick_voxel_pixels(cam, k, box, path.height);
       if (pixels <= options.lod_ratio || int(k.level) == layout.finest()) {
         chosen.push_back({k, d, float(pixels)});
         continue;

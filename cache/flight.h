@@ -30,15 +30,9 @@ struct FlightFrame {
   double seconds = 0;
 };
 
-/// @brief World-space box of a brick of the store (voxel centres, from origin and spacing).
-Box3d brick_world_box(const StoreLayout& layout, const Manifest& manifest, const BrickKey& key);
-
-/// @brief Pixels that one voxel of the brick's level covers, seen by `cam` at the nearest point
-/// of the brick's world box (the level-of-detail measure of refinement).
-double brick_voxel_pixels(const StoreLayout& layout, const Manifest& manifest, const Camera& cam, const BrickKey& key,
-                          const Box3d& world_box, int height);
-
-/// @brief Flies `path` through the cache's store; calls `on_frame` after each frame.
+/// @brief Flies `path` through the cache's grid; calls `on_frame` after each frame. Bricks'
+/// boxes and their level of detail come from the grid view (GridView::brick_world_box,
+/// GridView::brick_voxel_pixels), as the level-of-detail back ends take them.
 std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const FlightOptions& options,
                              const std::function<void(const FlightFrame&)>& on_frame = {});
 

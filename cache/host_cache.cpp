@@ -12,7 +12,7 @@ namespace brickyard {
 
 struct alignas(64) HostCache::Shard {
   mutable std::mutex mutex;
-  absl::flat_hash_map<uint64_t, BrickBuffer> map;
+  absl::flat_hash_map<uint64_t, PageBuffer> map;
   std::unique_ptr<Policy> policy;
   uint64_t budget = 0, bytes = 0, peak = 0;
   SlotCounters counters;
@@ -29,7 +29,7 @@ uint64_t mix(uint64_t k) {
 
 HostCache::HostCache(uint64_t budget, uint64_t entry_bytes, const std::string& policy) : budget_(budget) {
   if (budget < entry_bytes)
-    throw Error(Errc::invalid_argument, fmt::format("the L2 budget of {} is smaller than one decoded brick ({})",
+    throw Error(Errc::invalid_argument, fmt::format("the L2 budget of {} is smaller than one decoded page ({})",
                                                     format_bytes(double(budget)), format_bytes(double(entry_bytes))))
         .with_field("l2_bytes");
   uint32_t n = 1;
@@ -49,7 +49,7 @@ HostCache::~HostCache() = default;
 
 HostCache::Shard& HostCache::shard_of(uint64_t key) const { return *shards_[mix(key) & (shards_.size() - 1)]; }
 
-BrickBuffer HostCache::find(uint64_t key) {
+PageBuffer HostCache::find(uint64_t key) {
   Shard& s = shard_of(key);
   std::lock_guard lock(s.mutex);
   auto it = s.map.find(key);
@@ -68,7 +68,7 @@ bool HostCache::contains(uint64_t key) const {
   return s.map.contains(key);
 }
 
-bool HostCache::insert(uint64_t key, BrickBuffer data) {
+bool HostCache::insert(uint64_t key, PageBuffer data) {
   Shard& s = shard_of(key);
   const uint64_t size = data->size();
   std::lock_guard lock(s.mutex);

@@ -57,10 +57,17 @@ ReplayResult replay(const Trace& trace, const std::vector<uint64_t>& next, const
     return true;
   };
 
+  // Objects are (record kind, key) pairs: a trace of several kinds replays dense ids.
+  const std::vector<uint64_t> ids = object_ids(trace);
   uint32_t last_frame = UINT32_MAX;
   Stopwatch watch;
   for (size_t i = 0; i < trace.records.size(); ++i) {
-    const TraceRecord& a = trace.records[i];
+    const TraceRecord& record = trace.records[i];
+    struct {
+      uint64_t key;
+      uint32_t frame, size;
+      AccessKind kind;
+    } const a{ids[i], record.frame, record.size, record.kind};
     const uint64_t next_access = next.empty() ? kNoNextAccess : next[i];
     if (a.frame != last_frame) {
       policy->on_frame(a.frame);

@@ -78,17 +78,50 @@ TraceFormat trace_format_of(const std::string& path) {
 }
 
 uint64_t Trace::unique_objects() const {
-  absl::flat_hash_set<uint64_t> keys;
-  for (const auto& r : records) keys.insert(r.key);
+  absl::flat_hash_set<PageKey> keys;
+  for (const auto& r : records) keys.insert({r.record, r.key});
   return keys.size();
 }
 
 uint64_t Trace::unique_bytes() const {
-  absl::flat_hash_map<uint64_t, uint32_t> sizes;
-  for (const auto& r : records) sizes[r.key] = std::max(sizes[r.key], r.size);
+  absl::flat_hash_map<PageKey, uint32_t> sizes;
+  for (const auto& r : records) {
+    uint32_t& s = sizes[{r.record, r.key}];
+    s = std::max(s, r.size);
+  }
   uint64_t total = 0;
   for (const auto& [k, s] : sizes) total += s;
   return total;
+}
+
+std::vector<RecordKind> Trace::record_kinds() const {
+  bool seen[kRecordKinds] = {};
+  for (const auto& r : records) seen[size_t(r.record)] = true;
+  std::vector<RecordKind> out;
+  for (size_t k = 0; k < kRecordKinds; ++k)
+    if (seen[k]) out.push_back(RecordKind(k));
+  return out;
+}
+
+Trace Trace::of_kind(RecordKind kind) const {
+  Trace t;
+  for (const auto& r : records)
+    if (r.record == kind) t.records.push_back(r);
+  return t;
+}
+
+std::vector<uint64_t> object_ids(const Trace& trace) {
+  std::vector<uint64_t> ids(trace.records.size());
+  if (trace.record_kinds().size() <= 1) {
+    for (size_t i = 0; i < ids.size(); ++i) ids[i] = trace.records[i].key;
+    return ids;
+  }
+  absl::flat_hash_map<PageKey, uint64_t> dense;
+  for (size_t i = 0; i < ids.size(); ++i) {
+    const TraceRecord& r = trace.records[i];
+    ids[i] = dense.try_emplace(PageKey{r.record, r.key}, dense.size()).first->second;
+  }
+  return ids;
 }
 
 uint32_t Trace::frames() const {
@@ -97,14 +130,15 @@ uint32_t Trace::frames() const {
   return records.empty() ? 0 : f + 1;
 }
 
-std::vector<uint64_t> next_demand_access(const Trace& trace) {
+std::vector<uint64_t> next_demand_access(const Trace& trace, const std::vector<uint64_t>& given_ids) {
+  const std::vector<uint64_t> ids = given_ids.size() == trace.records.size() ? given_ids : object_ids(trace);
   std::vector<uint64_t> next(trace.records.size(), kNoNextAccess);
   absl::flat_hash_map<uint64_t, uint64_t> upcoming;
   for (size_t i = trace.records.size(); i-- > 0;) {
     const TraceRecord& r = trace.records[i];
-    auto it = upcoming.find(r.key);
+    auto it = upcoming.find(ids[i]);
     next[i] = it == upcoming.end() ? kNoNextAccess : it->second;
-    if (r.kind == AccessKind::demand || r.kind == AccessKind::blocking) upcoming[r.key] = i;
+    if (r.kind == AccessKind::demand || r.kind == AccessKind::blocking) upcoming[ids[i]] = i;
   }
   return next;
 }
@@ -134,7 +168,7 @@ Trace read_trace(const std::string& path, TraceFormat format) {
       for (char& c : line)
         if (c == ',') c = ' ';
       std::istringstream fields(line);
-      std::string key_text, size_text, extra;
+      std::string key_text, size_text, kind_text, extra;
       if (!(fields >> key_text)) continue;
       TraceRecord r;
       try {
@@ -147,11 +181,18 @@ Trace read_trace(const std::string& path, TraceFormat format) {
           r.size = uint32_t(s);
         }
       } catch (const std::exception&) {
-        throw Error(Errc::format, fmt::format("line {}: expected 'key [size]' with integers, got '{}'", n, line))
+        throw Error(Errc::format, fmt::format("line {}: expected 'key [size [kind]]' with integers, got '{}'", n, line))
             .with_file(path);
       }
+      if (fields >> kind_text) {
+        try {
+          r.record = record_kind_from_string(kind_text);
+        } catch (const Error& e) {
+          throw Error(Errc::format, fmt::format("line {}: {}", n, e.message())).with_file(path);
+        }
+      }
       if (fields >> extra)
-        throw Error(Errc::format, fmt::format("line {}: unexpected '{}' after key and size", n, extra)).with_file(path);
+        throw Error(Errc::format, fmt::format("line {}: unexpected '{}' after key, size and kind", n, extra)).with_file(path);
       t.records.push_back(r);
     }
     return t;
@@ -195,6 +236,10 @@ Trace read_trace(const std::string& path, TraceFormat format) {
           throw Error(Errc::format, fmt::format("record {}: unknown access kind {}", done + i, kind)).with_file(path);
         r.kind = AccessKind(kind);
         r.hit_level = get<uint8_t>(p + 17);
+        const uint8_t record = get<uint8_t>(p + 18);
+        if (record >= kRecordKinds)
+          throw Error(Errc::format, fmt::format("record {}: unknown record kind {}", done + i, record)).with_file(path);
+        r.record = RecordKind(record);
         r.thread = get<uint32_t>(p + 20);
       } else {
         r.frame = get<uint32_t>(p);  // timestamp: seconds in libCacheSim traces; kept as the time window
@@ -212,7 +257,9 @@ void write_trace(const std::string& path, const Trace& trace, TraceFormat format
   AtomicFile file(path);
   if (format == TraceFormat::text) {
     std::string text;
-    for (const auto& r : trace.records) text += fmt::format("{} {}\n", r.key, r.size);
+    for (const auto& r : trace.records)
+      text += r.record == RecordKind::brick ? fmt::format("{} {}\n", r.key, r.size)
+                                            : fmt::format("{} {} {}\n", r.key, r.size, to_string(r.record));
     file.write(text.data(), text.size());
     file.commit();
     return;
@@ -223,8 +270,11 @@ void write_trace(const std::string& path, const Trace& trace, TraceFormat format
     put<uint64_t>(header + 8, trace.records.size());
     file.write(header, 16);
   }
+  // oracleGeneral has no record kinds: a trace of several writes each (kind, key) object's
+  // dense id (object_ids) as its id.
+  const std::vector<uint64_t> ids = format == TraceFormat::oracle_general ? object_ids(trace) : std::vector<uint64_t>{};
   const std::vector<uint64_t> next =
-      format == TraceFormat::oracle_general ? next_demand_access(trace) : std::vector<uint64_t>{};
+      format == TraceFormat::oracle_general ? next_demand_access(trace, ids) : std::vector<uint64_t>{};
   std::vector<std::byte> buffer;
   buffer.reserve(kRecordBytes * 65536);
   for (size_t i = 0; i < trace.records.size(); ++i) {
@@ -236,10 +286,11 @@ void write_trace(const std::string& path, const Trace& trace, TraceFormat format
       put<uint32_t>(rec + 12, r.size);
       put<uint8_t>(rec + 16, uint8_t(r.kind));
       put<uint8_t>(rec + 17, r.hit_level);
+      put<uint8_t>(rec + 18, uint8_t(r.record));
       put<uint32_t>(rec + 20, r.thread);
     } else {
       put<uint32_t>(rec, r.frame);
-      put<uint64_t>(rec + 4, r.key);
+      put<uint64_t>(rec + 4, ids[i]);
       put<uint32_t>(rec + 12, r.size);
       put<int64_t>(rec + 16, next[i] == kNoNextAccess ? int64_t(-1) : int64_t(next[i]));
     }

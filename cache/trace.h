@@ -5,15 +5,22 @@
 ///
 /// Formats, chosen by read_trace from the file's first bytes or its name:
 /// - brickyard (`.bytrace`): a 16-byte header ("BYTRACE1", record count) then 24-byte records
-///   {u64 key, u32 frame, u32 size, u8 kind, u8 hit level, u16 reserved, u32 thread}, little-endian;
+///   {u64 key, u32 frame, u32 size, u8 kind, u8 hit level, u8 record kind, u8 reserved, u32
+///   thread}, little-endian (the record kind's byte was reserved, 0, in traces written before
+///   pages had kinds: they read as bricks);
 /// - libCacheSim oracleGeneral (`.oracleGeneral`, `.oracleGeneral.bin`): 24-byte records
 ///   {u32 timestamp, u64 object id, u32 size, i64 next access vtime (-1: never)};
-/// - text (`.txt`, `.csv`): one "key size" per line (size optional, default 1); '#' starts a comment.
+/// - text (`.txt`, `.csv`): one "key size kind" per line (size optional, default 1; kind
+///   optional, a record kind's name, default brick); '#' starts a comment.
+///
+/// An object is a (record kind, key) pair: the same key of two kinds is two objects.
 
 #include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include "dataset/pages.h"
 
 namespace brickyard {
 
@@ -32,6 +39,7 @@ struct TraceRecord {
   AccessKind kind = AccessKind::demand;
   uint8_t hit_level = 0; ///< where the live cache found it: 1 L1, 2 L2, 3 store; 0 unknown
   uint32_t thread = 0;
+  RecordKind record = RecordKind::brick;  ///< the kind of page accessed
 };
 
 struct Trace {
@@ -40,7 +48,15 @@ struct Trace {
   uint64_t unique_objects() const;
   uint64_t unique_bytes() const;
   uint32_t frames() const;  ///< 1 + the largest frame number
+  /// @brief The record kinds present, in RecordKind order.
+  std::vector<RecordKind> record_kinds() const;
+  /// @brief Only the records of one kind.
+  Trace of_kind(RecordKind kind) const;
 };
+
+/// @brief Per record, the id of its object: the key itself when the trace holds one record
+/// kind, else a dense id per distinct (kind, key), numbered in order of first access.
+std::vector<uint64_t> object_ids(const Trace& trace);
 
 enum class TraceFormat { brickyard, oracle_general, text };
 std::string_view to_string(TraceFormat f);
@@ -55,9 +71,9 @@ Trace read_trace(const std::string& path, TraceFormat format);
 /// @brief Writes a trace atomically in the given format (oracleGeneral gets next-access times).
 void write_trace(const std::string& path, const Trace& trace, TraceFormat format);
 
-/// @brief For each record, the index of the next demand access to the same key (kNoNextAccess
-/// = never): the future OPT looks at.
-std::vector<uint64_t> next_demand_access(const Trace& trace);
+/// @brief For each record, the index of the next demand access to the same object
+/// (kNoNextAccess = never): the future OPT looks at. `ids` from object_ids(), or empty.
+std::vector<uint64_t> next_demand_access(const Trace& trace, const std::vector<uint64_t>& ids = {});
 
 /// @brief Synthetic traces for sanity checks (size: bytes per object).
 Trace zipf_trace(uint64_t objects, uint64_t requests, double alpha, uint64_t seed, uint32_t size = 1);

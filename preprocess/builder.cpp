@@ -20,7 +20,7 @@
 #include "core/progress.h"
 #include "core/timing.h"
 #include "preprocess/volume_source.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 
 namespace brickyard {
 
@@ -142,7 +142,7 @@ class RecordWriter {
 // Per-build state shared by the levels.
 struct BuildContext {
   BrickFormat format;
-  StoreLayout layout;
+  GridLayout layout;
   NodeTable nodes;
   Downsample downsample = Downsample::average;
   double tolerance = 0;
@@ -484,7 +484,7 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   validate(options);
   Stopwatch watch;
   BuildResult result;
-  const StoreLayout layout = StoreLayout::make(source.dims(), options.brick_size);
+  const GridLayout layout = GridLayout::make(source.dims(), options.brick_size);
   const std::string source_json = source.describe_json();
   const std::string build_json = build_params_json(options, source.background());
 

@@ -16,11 +16,11 @@
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/progress.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 
 namespace brickyard {
 
-VoxelBox export_region(const BrickStore& store, int level, const std::optional<VoxelBox>& box) {
+VoxelBox export_region(const Store& store, int level, const std::optional<VoxelBox>& box) {
   if (level < 0 || level >= store.layout().levels)
     throw Error(Errc::invalid_argument,
                 fmt::format("level {} does not exist (the store has levels 0 to {})", level, store.layout().levels - 1))
@@ -36,7 +36,7 @@ VoxelBox export_region(const BrickStore& store, int level, const std::optional<V
   return *box;
 }
 
-void for_each_region_slab(const BrickStore& store, int level, const VoxelBox& region,
+void for_each_region_slab(const Store& store, int level, const VoxelBox& region,
                           const std::function<void(int64_t, int64_t, std::span<const std::byte>)>& sink,
                           Progress* progress) {
   const BrickFormat& f = store.format();
@@ -79,7 +79,7 @@ void for_each_region_slab(const BrickStore& store, int level, const VoxelBox& re
   }
 }
 
-RawVolumeInfo export_raw(const BrickStore& store, int level, const VoxelBox& region, const std::string& path,
+RawVolumeInfo export_raw(const Store& store, int level, const VoxelBox& region, const std::string& path,
                          Progress* progress) {
   AtomicFile file(path);
   std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> hash(XXH3_createState(), XXH3_freeState);

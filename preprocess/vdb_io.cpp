@@ -35,7 +35,7 @@
 #include "core/progress.h"
 #include "preprocess/export.h"
 #include "preprocess/volume_source.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 
 namespace brickyard {
 namespace {
@@ -274,7 +274,7 @@ struct BrickLeaves {
 
 class VdbWriter {
  public:
-  VdbWriter(const BrickStore& store, int level, const VoxelBox& region, const VdbProvenance& source)
+  VdbWriter(const Store& store, int level, const VoxelBox& region, const VdbProvenance& source)
       : store_(store), level_(level), region_(region), format_(store.format()),
         background_(float(store.manifest().background)),
         // A level set's inactive voxels are +-background (outside and inside); a background that is
@@ -414,7 +414,7 @@ class VdbWriter {
     return out;
   }
 
-  const BrickStore& store_;
+  const Store& store_;
   int level_;
   VoxelBox region_;
   BrickFormat format_;
@@ -486,7 +486,7 @@ std::unique_ptr<VolumeSource> open_vdb_source(const std::string& path, const std
   return std::make_unique<VdbSource>(path, std::move(grid), st);
 }
 
-void export_vdb(const BrickStore& store, int level, const VoxelBox& region, const std::string& path,
+void export_vdb(const Store& store, int level, const VoxelBox& region, const std::string& path,
                 const std::string& grid_name, Progress* progress) {
   initialize_openvdb();
   export_region(store, level, region);  // the same checks as every export: level and box

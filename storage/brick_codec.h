@@ -16,6 +16,7 @@
 
 #include "core/brick_key.h"
 #include "core/value_type.h"
+#include "dataset/grid.h"
 
 namespace brickyard {
 
@@ -46,18 +47,14 @@ struct BrickHeader {
 static_assert(sizeof(BrickHeader) == 64, "the brick header is part of the on-disk format");
 inline constexpr uint8_t kBrickShuffled = 1;
 
-/// @brief How bricks are laid out and compressed: fixed for a whole store.
-struct BrickFormat {
-  ValueType type = ValueType::u8;
-  int brick_size = 32;  ///< M, the interior edge in voxels
-  int apron = 1;        ///< A, replicated voxels on every side
+/// @brief How bricks are laid out (their shape, which readers see) and compressed (which only
+/// the store sees): fixed for a whole store.
+struct BrickFormat : BrickShape {
   Codec codec = Codec::lz4;
   int hc_level = 9;     ///< LZ4-HC compression level (1..12)
   bool shuffle = true;  ///< byte-shuffle before compression (u16 and f32 only)
 
-  int edge() const { return brick_size + 2 * apron; }
-  size_t voxels() const { return size_t(edge()) * size_t(edge()) * size_t(edge()); }
-  size_t bytes() const { return voxels() * size_of(type); }
+  const BrickShape& shape() const { return *this; }
   bool shuffles() const { return shuffle && type != ValueType::u8; }
 };
 

@@ -29,13 +29,23 @@ double Histogram::quantile(double q) const {
   return hi;
 }
 
-StoreLayout Manifest::layout() const { return StoreLayout::make(dims, format.brick_size); }
+GridLayout Manifest::layout() const { return GridLayout::make(dims, format.brick_size); }
 
 std::string Manifest::to_json() const {
   json j;
   j["format"] = "brickyard-store";
   j["format_version"] = format_version;
   j["complete"] = complete;
+  j["kind"] = std::string(brickyard::to_string(kind));
+  j["time_steps"] = time_steps;
+  j["value_range"] = {min_value, max_value};
+  j["source"] = json::parse(source);
+  j["build"] = json::parse(build);
+  if (kind == DataKind::tetrahedral) {
+    j["mesh"] = {{"bounds", {{mesh.bounds.lo.x, mesh.bounds.lo.y, mesh.bounds.lo.z}, {mesh.bounds.hi.x, mesh.bounds.hi.y, mesh.bounds.hi.z}}},
+                 {"clusters", mesh.clusters}, {"tets", mesh.tets}, {"vertices", mesh.vertices}, {"page_bytes", mesh.page_bytes}};
+    return j.dump(2);
+  }
   j["dims"] = {dims.x, dims.y, dims.z};
   j["spacing"] = {spacing.x, spacing.y, spacing.z};
   j["origin"] = {origin.x, origin.y, origin.z};
@@ -44,7 +54,6 @@ std::string Manifest::to_json() const {
   j["apron"] = format.apron;
   j["codec"] = {{"name", std::string(to_string(format.codec))}, {"hc_level", format.hc_level}, {"shuffle", format.shuffles()}};
   j["levels"] = levels;
-  j["value_range"] = {min_value, max_value};
   j["background"] = background;
   j["histogram"] = {{"lo", histogram.lo}, {"hi", histogram.hi}, {"counts", histogram.counts}};
   json st = json::array();
@@ -52,8 +61,6 @@ std::string Manifest::to_json() const {
     st.push_back({{"bricks", s.bricks}, {"constant", s.constant}, {"empty", s.empty}, {"raw_bytes", s.raw_bytes},
                   {"stored_bytes", s.stored_bytes}});
   j["level_stats"] = st;
-  j["source"] = json::parse(source);
-  j["build"] = json::parse(build);
   return j.dump(2);
 }
 
@@ -107,6 +114,37 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
   if (m.format_version < 1)
     throw Error(Errc::format, fmt::format("invalid format version {}", m.format_version)).with_file(path).with_field("format_version");
   m.complete = r.get<bool>("complete");
+  // Stores written before datasets had a kind are grids.
+  if (j.contains("kind")) {
+    try {
+      m.kind = data_kind_from_string(r.get<std::string>("kind"));
+    } catch (const Error& e) {
+      throw Error(Errc::format, e.message()).with_file(path).with_field("kind");
+    }
+  }
+  if (j.contains("time_steps")) m.time_steps = r.get<int>("time_steps");
+  if (m.time_steps < 1)
+    throw Error(Errc::format, fmt::format("{} time steps (need at least 1)", m.time_steps)).with_file(path).with_field("time_steps");
+  const auto range = r.get<std::vector<double>>("value_range");
+  if (range.size() != 2) throw Error(Errc::format, "expected [min, max]").with_file(path).with_field("value_range");
+  m.min_value = range[0];
+  m.max_value = range[1];
+  m.source = r.at("source").dump();
+  m.build = r.at("build").dump();
+  if (m.kind == DataKind::tetrahedral) {
+    const json& mesh = r.at("mesh");
+    if (!mesh.is_object()) throw Error(Errc::format, "not an object").with_file(path).with_field("mesh");
+    Reader rm{mesh, path};
+    const auto bounds = rm.get<std::vector<std::vector<double>>>("bounds");
+    if (bounds.size() != 2 || bounds[0].size() != 3 || bounds[1].size() != 3)
+      throw Error(Errc::format, "expected [[x, y, z], [x, y, z]]").with_file(path).with_field("mesh.bounds");
+    m.mesh.bounds = Box3d(Vec3d(bounds[0][0], bounds[0][1], bounds[0][2]), Vec3d(bounds[1][0], bounds[1][1], bounds[1][2]));
+    m.mesh.clusters = rm.get<uint64_t>("clusters");
+    m.mesh.tets = rm.get<uint64_t>("tets");
+    m.mesh.vertices = rm.get<uint64_t>("vertices");
+    m.mesh.page_bytes = rm.get<uint64_t>("page_bytes");
+    return m;
+  }
   m.dims = r.vec3<int64_t>("dims");
   m.spacing = r.vec3<double>("spacing");
   m.origin = r.vec3<double>("origin");
@@ -127,10 +165,6 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
   m.format.hc_level = rc.get<int>("hc_level");
   m.format.shuffle = rc.get<bool>("shuffle");
   m.levels = r.get<int>("levels");
-  const auto range = r.get<std::vector<double>>("value_range");
-  if (range.size() != 2) throw Error(Errc::format, "expected [min, max]").with_file(path).with_field("value_range");
-  m.min_value = range[0];
-  m.max_value = range[1];
   m.background = r.get<double>("background");
   const json& h = r.at("histogram");
   Reader rh{h, path};
@@ -142,10 +176,8 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
     m.stats.push_back({rs.get<int64_t>("bricks"), rs.get<int64_t>("constant"), rs.get<int64_t>("empty"),
                        rs.get<uint64_t>("raw_bytes"), rs.get<uint64_t>("stored_bytes")});
   }
-  m.source = r.at("source").dump();
-  m.build = r.at("build").dump();
   // The layout must agree with the recorded level count, or nothing else can be trusted.
-  const StoreLayout layout = m.layout();
+  const GridLayout layout = m.layout();
   if (layout.levels != m.levels)
     throw Error(Errc::format, fmt::format("{} levels recorded, but dims and brick size give {}", m.levels, layout.levels))
         .with_file(path)

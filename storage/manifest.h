@@ -12,12 +12,16 @@
 #include <vector>
 
 #include "core/math.h"
+#include "dataset/dataset.h"
+#include "dataset/grid.h"
 #include "storage/brick_codec.h"
-#include "storage/layout.h"
 
 namespace brickyard {
 
-inline constexpr int kStoreFormatVersion = 1;
+/// Version 1: grid stores (a manifest without `kind` is one). Version 2 adds tetrahedral
+/// stores; grid stores are still written as version 1, so older builds keep reading them.
+inline constexpr int kStoreFormatVersion = 2;
+inline constexpr int kGridStoreFormatVersion = 1;
 
 struct Histogram {
   double lo = 0, hi = 0;          ///< bins split [lo, hi] evenly; values outside are clamped into the end bins
@@ -35,9 +39,20 @@ struct LevelStats {
   uint64_t stored_bytes = 0;  ///< record bytes of the stored bricks (headers included)
 };
 
+/// @brief What a tetrahedral store's manifest says of its mesh (the cluster table has the rest).
+struct MeshSummary {
+  Box3d bounds;              ///< every vertex, world coordinates
+  uint64_t clusters = 0, tets = 0, vertices = 0;
+  uint64_t page_bytes = 0;   ///< the decoded size of every cluster page (the largest cluster's)
+};
+
 struct Manifest {
-  int format_version = kStoreFormatVersion;
+  int format_version = kGridStoreFormatVersion;
   bool complete = false;
+  DataKind kind = DataKind::structured;
+  int time_steps = 1;
+  MeshSummary mesh;  ///< tetrahedral stores only
+  // Grid stores only: dims through stats.
   Vec3s dims{0};
   Vec3d spacing{1.0};
   Vec3d origin{0.0};
@@ -51,7 +66,7 @@ struct Manifest {
   std::string source = "{}";  ///< provenance: kind, path, size, checksum, parameters
   std::string build = "{}";   ///< build parameters (downsampling, tolerance, clamp, ...)
 
-  StoreLayout layout() const;
+  GridLayout layout() const;
   /// @brief Canonical JSON (sorted keys, 2-space indent).
   std::string to_json() const;
   /// @brief Parses and validates; errors name `path` and the key at fault. A newer

@@ -28,8 +28,8 @@ class CellAccessor {
         counters_(counters),
         level_(level),
         M_(cache.layout().brick_size),
-        A_(cache.format().apron),
-        E_(cache.format().edge()),
+        A_(cache.shape().apron),
+        E_(cache.shape().edge()),
         dims_(cache.layout().level_dims(level)),
         bricks_(cache.layout().level_bricks(level)) {}
 

@@ -57,7 +57,7 @@ inline void mip_color(const RenderContext& ctx, double value, PixelResult& p) {
   if (!scene.transfer_function.empty()) {
     scene.transfer_function.eval(value, c, a);
   } else {
-    const double lo = ctx.manifest().min_value, hi = ctx.manifest().max_value;
+    const double lo = ctx.dataset().min_value, hi = ctx.dataset().max_value;
     c = Vec3f(float(hi > lo ? std::clamp((value - lo) / (hi - lo), 0.0, 1.0) : 1.0));
   }
   p.color = c * a + scene.background * (1 - a);

@@ -27,4 +27,9 @@ const BackendRegistry& builtin_backends() {
   return registry;
 }
 
+BackendRegistry& backends() {
+  static BackendRegistry registry = builtin_backends();
+  return registry;
+}
+
 }  // namespace brickyard

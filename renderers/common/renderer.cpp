@@ -6,8 +6,6 @@
 
 namespace brickyard {
 
-std::string_view to_string(DataKind k) { return k == DataKind::structured ? "structured" : "tetrahedral"; }
-
 bool BackendInfo::accepts(DataKind kind, RenderMode mode) const {
   return std::find(kinds.begin(), kinds.end(), kind) != kinds.end() &&
          std::find(modes.begin(), modes.end(), mode) != modes.end();
@@ -45,7 +43,7 @@ double BackendParams::operator[](const std::string& name) const {
 const RenderContext::ValueSpan& RenderContext::range_below(const BrickKey& k) const {
   std::call_once(ranges_below_once_, [this] {
     const NodeTable& table = nodes();
-    const StoreLayout& layout = table.layout();
+    const GridLayout& layout = table.layout();
     ranges_below_.resize(size_t(layout.levels));
     for (int l = layout.finest(); l >= 0; --l) {
       const Vec3s n = layout.level_bricks(l);
@@ -72,28 +70,45 @@ const RenderContext::ValueSpan& RenderContext::range_below(const BrickKey& k) co
 }
 
 uint64_t RenderContext::backend_pool_bytes() const {
-  const CacheConfig& c = cache_.config();
+  const CacheConfig& c = pages_->config();
   return c.backend_pool_bytes ? c.backend_pool_bytes : c.l1_bytes;
 }
 
-RenderContext::RenderContext(const Scene& scene, BrickCache& cache) : scene_(scene), cache_(cache) {
-  const Manifest& m = cache.store().manifest();
+RenderContext::RenderContext(const Scene& scene, const Dataset& dataset, PageCache& pages, BrickCache* bricks)
+    : scene_(scene), dataset_(dataset), pages_(&pages), bricks_(bricks) {
+  BY_CHECK(dataset.has_grid() == (bricks != nullptr));
   VolumeGeometry& g = geometry_;
-  g.dims = m.dims;
-  g.origin = m.origin;
-  g.spacing = m.spacing;
-  const Vec3d last = Vec3d(m.dims - Vec3s(1));
-  g.world = Box3d(m.origin, m.origin + m.spacing * last);
-  g.voxel_size = min_component(m.spacing);
-  g.voxel_clip = Box3d(Vec3d(0.0), last);
+  const DatasetInfo& info = dataset.info();
+  g.world = info.world;
+  g.voxel_size = info.unit_length;
+  if (dataset.has_grid()) {
+    const GridView& grid = dataset.grid();
+    g.dims = grid.dims();
+    g.origin = grid.origin();
+    g.spacing = grid.spacing();
+    g.voxel_clip = Box3d(Vec3d(0.0), Vec3d(g.dims - Vec3s(1)));
+  } else {
+    g.origin = info.world.lo;
+    g.voxel_clip = Box3d(Vec3d(0.0), info.world.extent());
+  }
   if (scene.clip) {
     const Box3d c{g.to_voxel(g.from_normalised(scene.clip->lo)), g.to_voxel(g.from_normalised(scene.clip->hi))};
     g.voxel_clip = g.voxel_clip.intersect(c);
   }
 }
 
+void RenderContext::rebind_cache(PageCache& pages, BrickCache* bricks) {
+  BY_CHECK(dataset_.has_grid() == (bricks != nullptr));
+  pages_ = &pages;
+  bricks_ = bricks;
+}
+
 void BackendRegistry::add(BackendEntry entry) {
-  BY_CHECK(!contains(entry.info.name));
+  if (entry.info.name.empty() || !entry.create)
+    throw Error(Errc::invalid_argument, "a back end needs a name and a factory").with_field("backend");
+  if (contains(entry.info.name))
+    throw Error(Errc::invalid_argument, fmt::format("a back end named '{}' is registered already", entry.info.name))
+        .with_field("backend");
   entries_.push_back(std::move(entry));
 }
 

@@ -21,14 +21,13 @@
 #include <vector>
 
 #include "cache/brick_cache.h"
+#include "cache/page_cache.h"
 #include "core/camera.h"
+#include "dataset/dataset.h"
 #include "renderers/common/frame.h"
 #include "renderers/common/scene.h"
 
 namespace brickyard {
-
-enum class DataKind : uint8_t { structured, tetrahedral };
-std::string_view to_string(DataKind k);
 
 struct BackendParam {
   std::string name;
@@ -76,14 +75,16 @@ class BackendParams {
   std::map<std::string, double> values_;
 };
 
-/// @brief The finest level's geometry: world <-> voxel coordinates (voxel i of axis a sits at
-/// origin[a] + i * spacing[a]; the volume spans voxel coordinates [0, dims - 1]).
+/// @brief Where the data sits, in the terms rays use. For a grid, the finest level's geometry:
+/// world <-> voxel coordinates (voxel i of axis a sits at origin[a] + i * spacing[a]; the volume
+/// spans voxel coordinates [0, dims - 1]). For a mesh, "voxel" coordinates are world
+/// coordinates from the mesh box's low corner (dims 0, spacing 1).
 struct VolumeGeometry {
   Vec3s dims{0};
   Vec3d origin{0.0}, spacing{1.0};
-  Box3d world;       ///< the volume's bounding box in world coordinates
+  Box3d world;       ///< the dataset's bounding box in world coordinates
   Box3d voxel_clip;  ///< the region rendered, in voxel coordinates (volume box and clip box)
-  double voxel_size = 1;  ///< the smallest spacing: depth errors are reported in these units
+  double voxel_size = 1;  ///< the dataset's unit length: depth errors are reported in these units
 
   Vec3d to_voxel(const Vec3d& w) const { return (w - origin) / spacing; }
   Vec3d to_world(const Vec3d& v) const { return origin + v * spacing; }
@@ -91,16 +92,35 @@ struct VolumeGeometry {
   Vec3d from_normalised(const Vec3d& n) const { return world.lo + n * world.extent(); }
 };
 
-/// @brief Everything shared by the back ends of one scene, immutable while frames render.
+/// @brief Everything shared by the back ends of one scene, immutable while frames render: the
+/// scene, the dataset's generic part and its typed views, and the cache (the only way to the
+/// data: no store is reachable from here).
+///
+/// Lifetime: the scene, the dataset and the caches are the caller's (a RenderSession's) and
+/// must outlive the context and every back end built on it.
 class RenderContext {
  public:
-  RenderContext(const Scene& scene, BrickCache& cache);
+  /// @param bricks  the grid's bricks in `pages`, for a dataset with a grid view; else null.
+  RenderContext(const Scene& scene, const Dataset& dataset, PageCache& pages, BrickCache* bricks);
 
   const Scene& scene() const { return scene_; }
-  BrickCache& cache() const { return cache_; }
-  const StoreLayout& layout() const { return cache_.layout(); }
-  const NodeTable& nodes() const { return cache_.nodes(); }
-  const Manifest& manifest() const { return cache_.store().manifest(); }
+  /// @brief The generic part: kind, world box, value range, time steps, provenance.
+  const DatasetInfo& dataset() const { return dataset_.info(); }
+  DataKind kind() const { return dataset_.kind(); }
+  /// @brief The grid view. @throws Error(unsupported) naming the dataset when it has none: a
+  /// back end that asks for it in its factory is refused before the first frame.
+  const GridView& grid() const { return dataset_.grid(); }
+  /// @brief The tetrahedral mesh's view (cluster table). @throws Error(unsupported) when none.
+  const TetView& tets() const { return dataset_.tets(); }
+  /// @brief Every record kind through one cache.
+  PageCache& pages() const { return *pages_; }
+  /// @brief The grid's bricks in the cache. @throws Error(unsupported) when the dataset has no grid.
+  BrickCache& bricks() const {
+    if (!bricks_) (void)dataset_.grid();  // throws, naming the dataset
+    return *bricks_;
+  }
+  const GridLayout& layout() const { return grid().layout(); }
+  const NodeTable& nodes() const { return grid().nodes(); }
   const VolumeGeometry& geometry() const { return geometry_; }
   /// @brief Whether a node can contribute to the image: its value range meets an isovalue or
   /// the transfer function's non-zero opacity (the scene's value filter). Nodes that cannot are
@@ -128,10 +148,15 @@ class RenderContext {
   /// allocate for it: the part of the L1 budget the cache's L1 left (share_l1_budget), or the
   /// cache's whole L1 budget for a cache built without sharing it.
   uint64_t backend_pool_bytes() const;
+  /// @brief Points the context at a new cache (a session's reset_cache()), between frames and
+  /// with no back end alive that was built on the old one.
+  void rebind_cache(PageCache& pages, BrickCache* bricks);
 
  private:
   const Scene& scene_;
-  BrickCache& cache_;
+  const Dataset& dataset_;
+  PageCache* pages_;
+  BrickCache* bricks_;
   VolumeGeometry geometry_;
   mutable std::once_flag ranges_below_once_;
   mutable std::vector<std::vector<ValueSpan>> ranges_below_;  // per level, per node
@@ -183,6 +208,7 @@ struct BackendEntry {
 /// listing the known ones.
 class BackendRegistry {
  public:
+  /// @throws Error(invalid_argument) when a back end of that name is registered already.
   void add(BackendEntry entry);
   const BackendEntry& find(const std::string& name) const;
   bool contains(const std::string& name) const;
@@ -195,5 +221,9 @@ class BackendRegistry {
 
 /// @brief The built-in back ends (registered on first use, in renderers/common/registry.cpp).
 const BackendRegistry& builtin_backends();
+/// @brief The process's back ends: the built-in ones, then those that modules loaded
+/// (session/modules.h) registered. Modules are loaded before any session is built; after
+/// that the registry is only read, from any thread.
+BackendRegistry& backends();
 
 }  // namespace brickyard

@@ -158,7 +158,7 @@ class StoreSource final : public Source {
     const BrickKey k = store_key(a);
     // Past the budget a miss is not requested: the loader or the rays ask for it again later.
     const bool may_request = requests_left_ > 0;
-    BrickHandle h = wait ? ctx_.cache().fetch(k) : ctx_.cache().lookup(k, priority, may_request);
+    BrickHandle h = wait ? ctx_.bricks().fetch(k) : ctx_.bricks().lookup(k, priority, may_request);
     const int64_t m = layout_.brick_size, e = m + 2;
     if (h.constant()) {  // a level's constant over a subtree that is not
       std::fill_n(out, e * e * e, h.constant_value());
@@ -172,7 +172,7 @@ class StoreSource final : public Source {
       return Fill::requested;
     }
     const Stored* src = h.template voxels<Stored>();
-    const int64_t es = ctx_.cache().format().edge(), skip = ctx_.cache().format().apron - 1;
+    const int64_t es = ctx_.bricks().shape().edge(), skip = ctx_.bricks().shape().apron - 1;
     for (int64_t z = 0; z < e; ++z)
       for (int64_t y = 0; y < e; ++y) {
         const Stored* row = src + ((z + skip) * es + (y + skip)) * es + skip;
@@ -184,13 +184,13 @@ class StoreSource final : public Source {
   }
   uint64_t loaded() const override { return loaded_; }
   void set_request_budget(uint32_t requests) override {
-    const uint32_t slots = ctx_.cache().pool_slots(), stages = slots - std::min(reserved_slots_, slots / 2);
+    const uint32_t slots = ctx_.bricks().pool_slots(), stages = slots - std::min(reserved_slots_, slots / 2);
     requests_left_ = std::min(requests, std::max(1u, stages / 2));
   }
 
  private:
   const RenderContext& ctx_;
-  const StoreLayout& layout_;
+  const GridLayout& layout_;
   uint32_t reserved_slots_;
   uint64_t loaded_ = 0;
   uint32_t requests_left_ = std::numeric_limits<uint32_t>::max();
@@ -203,7 +203,7 @@ template <typename Stored>
 class AmplifiedSource final : public Source {
  public:
   AmplifiedSource(const RenderContext& ctx, const GigaVoxelsParams& p)
-      : ctx_(ctx), layout_(ctx.layout()), stored_(ctx, kCoarseSamplerSlots), coarse_(ctx.cache(), coarse_counters_, ctx.layout().finest()) {
+      : ctx_(ctx), layout_(ctx.layout()), stored_(ctx, kCoarseSamplerSlots), coarse_(ctx.bricks(), coarse_counters_, ctx.layout().finest()) {
     const NodeRecord& root = ctx.nodes().at(BrickKey{0, 0, 0, 0});
     gigavoxels::AmplifiedParams ap;
     ap.brick_size = layout_.brick_size;
@@ -272,7 +272,7 @@ class AmplifiedSource final : public Source {
 
  private:
   const RenderContext& ctx_;
-  const StoreLayout& layout_;
+  const GridLayout& layout_;
   StoreSource<Stored> stored_;
   RayCounters coarse_counters_;
   std::mutex coarse_mutex_;
@@ -322,14 +322,14 @@ class GigaVoxelsRenderer final : public Renderer {
     // The tree's unit cube: for a store, the root brick's extent in finest voxel-edge
     // coordinates (its levels halve up to one brick; voxel i's cell starts at i - 0.5); for the
     // sponge, the volume's box (voxel centres 0 to dims - 1).
-    const StoreLayout& layout = ctx.layout();
+    const GridLayout& layout = ctx.layout();
     if (p.source != 1)  // the amplified store's levels past the finest stored one halve its voxels
       for (int d = 0; d <= source_->max_depth(); ++d)
         level_dims_.push_back(d <= layout.finest() ? layout.level_dims(d) : layout.dims * (int64_t(1) << (d - layout.finest())));
     if (p.source == 1) {
       if (geo_.dims.y != geo_.dims.x || geo_.dims.z != geo_.dims.x || geo_.dims.x < 2)
         throw Error(Errc::unsupported, "gigavoxels source=menger needs a cubic volume of at least 2 voxels per axis (its box is the sponge)")
-            .with_file(ctx.cache().store().path());
+            .with_file(ctx.dataset().name);
       extent_ = double(geo_.dims.x - 1), unit_offset_ = 0;
     } else {
       extent_ = double(layout.brick_size) * double(int64_t(1) << layout.finest()), unit_offset_ = 0.5;
@@ -345,9 +345,9 @@ class GigaVoxelsRenderer final : public Renderer {
     finest_voxel_unit_ = 1.0 / extent_;  // one finest voxel in unit coordinates (opacity reference)
     unit_gradient_to_world_ = Vec3d(1.0) / (geo_.spacing * extent_);
     tree_.set_root(root_node(), NodeAddress{});
-    if (p.source != 1 && ctx.cache().format().apron < 1)  // the sponge reads no stored brick
+    if (p.source != 1 && ctx.bricks().shape().apron < 1)  // the sponge reads no stored brick
       throw Error(Errc::unsupported, "gigavoxels copies bricks with a 1-voxel border: the store needs an apron of at least 1")
-          .with_file(ctx.cache().store().path());
+          .with_file(ctx.dataset().name);
   }
 
   void begin_frame(const FrameSetup& setup) override {
@@ -2276,7 +2276,7 @@ BackendEntry gigavoxels_backend() {
     gp.sample_runs = p["sample_runs"] != 0;
     gp.termination_fill = p["termination_fill"] != 0;
     gp.leap_chains = p["leap_chains"] != 0;
-    return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
+    return dispatch_value_type(ctx.bricks().shape().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       using Stored = decltype(stored);
       std::unique_ptr<Source> source;
       if (gp.source == 1) {

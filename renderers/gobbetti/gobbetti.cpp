@@ -27,7 +27,6 @@
 
 #include <fmt/format.h>
 
-#include "cache/flight.h"
 #include "core/timing.h"
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
@@ -61,11 +60,11 @@ class GobbettiRenderer final : public Renderer {
     lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
     clip_world_ = Box3d(geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi));
     M_ = layout_.brick_size;
-    A_ = ctx.cache().format().apron;
-    E_ = ctx.cache().format().edge();
+    A_ = ctx.bricks().shape().apron;
+    E_ = ctx.bricks().shape().edge();
     if (A_ < 1)
       throw Error(Errc::unsupported, "gobbetti samples bricks through their apron: the store needs an apron of at least 1")
-          .with_file(ctx.cache().store().path());
+          .with_file(ctx.dataset().name);
     const double factor = scene_.mode == RenderMode::iso ? scene_.quality.step_factor
                                                          : scene_.quality.step_factor / scene_.sampling_rate;
     for (int l = 0; l < layout_.levels; ++l) {
@@ -132,20 +131,20 @@ class GobbettiRenderer final : public Renderer {
     bool operator<(const Candidate& o) const { return pixels < o.pixels; }
   };
 
-  Box3d world_box(const BrickKey& k) const { return brick_world_box(layout_, ctx_.manifest(), k); }
+  Box3d world_box(const BrickKey& k) const { return ctx_.grid().brick_world_box(k); }
   double voxel_pixels(const BrickKey& k, const Camera& cam, int height) const {
-    return brick_voxel_pixels(layout_, ctx_.manifest(), cam, k, world_box(k), height);
+    return ctx_.grid().brick_voxel_pixels(cam, k, world_box(k), height);
   }
   bool was_visible(const BrickKey& k) const {
     if (!p_.visibility) return true;
-    const std::optional<bool> v = ctx_.cache().visibility(k);
+    const std::optional<bool> v = ctx_.bricks().visibility(k);
     return !v || *v;
   }
 
   /// What a node of the cut is for this frame, when it is a leaf.
   enum class NodeUse { empty, constant, data };
   NodeUse use_of(const BrickKey& k, const Camera& cam, int width, int height) const {
-    if (!ctx_.cache().layout().contains(k)) return NodeUse::empty;
+    if (!ctx_.bricks().layout().contains(k)) return NodeUse::empty;
     const NodeRecord& n = ctx_.nodes().at(k);
     if (!ctx_.subtree_visible(k)) return NodeUse::empty;  // its own level's range can miss finer detail
     const Box3d box = world_box(k);
@@ -168,7 +167,7 @@ class GobbettiRenderer final : public Renderer {
   }
 
   void refine(const FrameSetup& setup) {
-    BrickCache& cache = ctx_.cache();
+    BrickCache& cache = ctx_.bricks();
     const Camera& cam = setup.camera;
     // The previous cut stays pinned while this one is built (see end_frame()).
     std::vector<BrickHandle> previous = std::move(handles_);
@@ -321,7 +320,7 @@ class GobbettiRenderer final : public Renderer {
   }
 
   void query_visibility(const FrameSetup& setup) {
-    BrickCache& cache = ctx_.cache();
+    BrickCache& cache = ctx_.bricks();
     const Camera& cam = setup.camera;
     const int w = setup.width, h = setup.height;
     const ImageRays rays(cam, w, h);
@@ -615,7 +614,7 @@ class GobbettiRenderer final : public Renderer {
   const RenderContext& ctx_;
   const Scene& scene_;
   const VolumeGeometry& geo_;
-  const StoreLayout& layout_;
+  const GridLayout& layout_;
   GobbettiParams p_;
   ShadingModel shading_;
   double lod_ratio_ = 1;
@@ -669,7 +668,7 @@ BackendEntry gobbetti_backend() {
     gp.visibility_pixels = int(p["visibility_pixels"]);
     gp.visibility_groups = int(p["visibility_groups"]);
     gp.refine = int(p["refine"]);
-    return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
+    return dispatch_value_type(ctx.bricks().shape().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       return std::make_unique<GobbettiRenderer<decltype(stored)>>(ctx, gp);
     });
   };

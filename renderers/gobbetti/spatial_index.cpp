@@ -81,7 +81,7 @@ void SpatialIndex::table_grow() {
 
 // --- build ---------------------------------------------------------------------------
 
-void SpatialIndex::build(const StoreLayout& layout, std::span<const CutLeaf> leaves) {
+void SpatialIndex::build(const GridLayout& layout, std::span<const CutLeaf> leaves) {
   if (layout.levels < 1 || layout.levels > kMaxLevels)
     throw Error(Errc::invalid_argument, fmt::format("spatial index: {} levels (1..{} supported)", layout.levels, kMaxLevels));
   levels_ = layout.levels;

@@ -64,7 +64,7 @@
 
 #include "core/brick_key.h"
 #include "core/math.h"
-#include "storage/layout.h"
+#include "dataset/grid.h"
 
 namespace brickyard::gobbetti {
 
@@ -114,7 +114,7 @@ class SpatialIndex {
   /// @brief Rebuilds the index from the leaves of a cut (any order), reusing the previous
   /// build's storage. Throws Error(Errc::invalid_argument) on an invalid cut (see the file
   /// comment), Error(Errc::resource) beyond kMaxNodes nodes. O(number of nodes).
-  void build(const StoreLayout& layout, std::span<const CutLeaf> leaves);
+  void build(const GridLayout& layout, std::span<const CutLeaf> leaves);
 
   /// @brief Calls visit(const LeafVisit&) -> bool for the leaves that the ray org + t dir
   /// crosses for t in [t0, t1], front to back; returning false stops the walk. See the file

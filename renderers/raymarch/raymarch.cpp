@@ -57,7 +57,7 @@ class RaymarchRenderer final : public Renderer {
     const bool gradients;
 
     Marcher(const RaymarchRenderer& renderer, const FrameSetup& s, RayCounters& c)
-        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), sampler(r.ctx_.cache(), c, r.finest_), gradients(r.ctx_.needs_gradients(s.outputs)) {}
+        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), sampler(r.ctx_.bricks(), c, r.finest_), gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
     /// Calls f(t) at every fixed sample position t0 + (k + 1/2) dt inside a visible brick,
     /// in order, until f returns false. `entered(t)` is called when the ray enters a visible
@@ -271,7 +271,7 @@ BackendEntry raymarch_backend() {
     RaymarchParams rp;
     rp.step = p["step"];
     rp.refine = int(p["refine"]);
-    return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
+    return dispatch_value_type(ctx.bricks().shape().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       return std::make_unique<RaymarchRenderer<decltype(stored)>>(ctx, rp);
     });
   };

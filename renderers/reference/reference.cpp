@@ -12,7 +12,7 @@
 // - mip: the exact maximum of the interpolant along the ray (per cell, at the cubic's ends
 //   and critical points).
 // - analytic = 1: the same integrals evaluated on the procedural field the store was made
-//   from (manifest source), a truth that does not depend on the voxel grid.
+//   from (the dataset's source), a truth that does not depend on the voxel grid.
 
 #include <cmath>
 #include <limits>
@@ -39,8 +39,9 @@ constexpr double kOpaque = 1 - 1e-7;
 /// The field a store was made from, in the store's units and world coordinates.
 class AnalyticTruth {
  public:
-  static std::unique_ptr<AnalyticTruth> from_manifest(const Manifest& m) {
-    const nlohmann::json j = nlohmann::json::parse(m.source, nullptr, /*allow_exceptions=*/false);
+  /// `source`: the dataset's provenance (DatasetInfo::source); `type`: its stored value type.
+  static std::unique_ptr<AnalyticTruth> from_source(const std::string& source, ValueType type) {
+    const nlohmann::json j = nlohmann::json::parse(source, nullptr, /*allow_exceptions=*/false);
     if (!j.is_object()) return nullptr;
     const nlohmann::json* g = &j;
     if (j.value("kind", "") != "field") {
@@ -55,11 +56,11 @@ class AnalyticTruth {
         if (it->is_number()) params[it.key()] = it->get<double>();
     auto truth = std::make_unique<AnalyticTruth>();
     truth->field_ = make_field((*g)["field"].get<std::string>(), params);
-    if (is_integer(m.format.type)) {
+    if (is_integer(type)) {
       auto q = g->find("quantization");
       if (q == g->end() || !q->is_array() || q->size() != 2) return nullptr;
       const double lo = (*q)[0].get<double>(), hi = (*q)[1].get<double>();
-      truth->scale_ = integer_max(m.format.type) / (hi - lo);
+      truth->scale_ = integer_max(type) / (hi - lo);
       truth->offset_ = -lo * truth->scale_;
     }
     return truth;
@@ -111,7 +112,7 @@ class ReferenceRenderer final : public Renderer {
     bool visible = true;
 
     Tracer(const ReferenceRenderer& renderer, const FrameSetup& s, RayCounters& c)
-        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), cells(r.ctx_.cache(), c, r.finest_), sampler(r.ctx_.cache(), c, r.finest_),
+        : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), cells(r.ctx_.bricks(), c, r.finest_), sampler(r.ctx_.bricks(), c, r.finest_),
           gradients(r.ctx_.needs_gradients(s.outputs)) {}
 
     /// Whether the brick holding cell (i, j, k) can contribute (node table): others are never fetched.
@@ -380,14 +381,14 @@ BackendEntry reference_backend() {
     rp.analytic = p["analytic"] != 0;
     std::unique_ptr<AnalyticTruth> truth;
     if (rp.analytic) {
-      truth = AnalyticTruth::from_manifest(ctx.manifest());
+      truth = AnalyticTruth::from_source(ctx.dataset().source, ctx.grid().shape().type);
       if (!truth)
         throw Error(Errc::invalid_argument, "analytic = 1 needs a store made from a procedural field "
                                             "(brickyard import field:NAME, or a raw file from brickyard generate)")
-            .with_file(ctx.cache().store().path())
+            .with_file(ctx.dataset().name)
             .with_field("backend.params.analytic");
     }
-    return dispatch_value_type(ctx.cache().format().type, [&](auto stored) -> std::unique_ptr<Renderer> {
+    return dispatch_value_type(ctx.bricks().shape().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       return std::make_unique<ReferenceRenderer<decltype(stored)>>(ctx, rp, std::move(truth));
     });
   };

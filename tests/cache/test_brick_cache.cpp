@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "cache/brick_cache.h"
+#include "session/grid_cache.h"
 #include "cache/trace.h"
 #include "core/error.h"
 #include "preprocess/builder.h"
@@ -29,31 +30,31 @@ class BrickCacheTest : public ::testing::Test {
     build_store(*fbm, dir_->file("fbm"), o);
     auto blobs = make_field_source(make_field("sparse-blobs"), {64, 64, 64}, ValueType::u8);
     build_store(*blobs, dir_->file("blobs"), o);
-    store_ = new BrickStore(dir_->file("fbm"));
+    store_ = new Store(dir_->file("fbm"));
   }
   static void TearDownTestSuite() {
     delete store_;
     delete dir_;
   }
-  static std::vector<BrickKey> finest_keys(const BrickStore& s) {
+  static std::vector<BrickKey> finest_keys(const Store& s) {
     std::vector<BrickKey> keys;
-    const StoreLayout& l = s.layout();
+    const GridLayout& l = s.layout();
     for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
       const BrickKey k = l.key_at(l.finest(), i);
       if (s.nodes().at(k).has_payload()) keys.push_back(k);
     }
     return keys;
   }
-  static std::vector<std::byte> decoded(const BrickStore& s, const BrickKey& k) {
+  static std::vector<std::byte> decoded(const Store& s, const BrickKey& k) {
     std::vector<std::byte> out(s.format().bytes());
     s.read_brick(k, out);
     return out;
   }
   static testing::TempDir* dir_;
-  static BrickStore* store_;
+  static Store* store_;
 };
 testing::TempDir* BrickCacheTest::dir_ = nullptr;
-BrickStore* BrickCacheTest::store_ = nullptr;
+Store* BrickCacheTest::store_ = nullptr;
 
 CacheConfig small_config(uint32_t slots, uint64_t l2_bricks, uint64_t brick_bytes) {
   CacheConfig c;
@@ -81,7 +82,8 @@ int resident_now(BrickCache& cache, const std::vector<BrickRequest>& asked) {
 }
 
 TEST_F(BrickCacheTest, FetchReturnsTheDecodedBrickPinnedInTheePool) {
-  BrickCache cache(*store_, small_config(16, 64, store_->format().bytes()));
+  GridCache cache_pages(*store_, small_config(16, 64, store_->format().bytes()));
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   BrickHandle h = cache.fetch(keys[3]);
   ASSERT_TRUE(h.resident());
@@ -97,7 +99,8 @@ TEST_F(BrickCacheTest, FetchReturnsTheDecodedBrickPinnedInTheePool) {
 }
 
 TEST_F(BrickCacheTest, AMissQueuesARequestThatTheLoaderServes) {
-  BrickCache cache(*store_, small_config(64, 64, store_->format().bytes()));
+  GridCache cache_pages(*store_, small_config(64, 64, store_->format().bytes()));
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   cache.frame_begin();
   for (int i = 0; i < 10; ++i) {
@@ -128,9 +131,10 @@ TEST_F(BrickCacheTest, AMissQueuesARequestThatTheLoaderServes) {
 }
 
 TEST_F(BrickCacheTest, ConstantNodesNeedNoSlot) {
-  BrickStore blobs(dir_->file("blobs"));
-  BrickCache cache(blobs, small_config(4, 8, blobs.format().bytes()));
-  const StoreLayout& l = blobs.layout();
+  Store blobs(dir_->file("blobs"));
+  GridCache cache_pages(blobs, small_config(4, 8, blobs.format().bytes()));
+  BrickCache& cache = cache_pages.bricks();
+  const GridLayout& l = blobs.layout();
   int constants = 0;
   for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
     const BrickKey k = l.key_at(l.finest(), i);
@@ -154,11 +158,12 @@ TEST(BrickCacheConstants, NearConstantBricksCarryTheirStoredValue) {
   o.constant_tolerance = 255;
   auto src = make_field_source(make_field("sphere"), {32, 32, 32}, ValueType::u8);
   build_store(*src, dir.file("s"), o);
-  BrickStore store(dir.file("s"));
+  Store store(dir.file("s"));
   CacheConfig c;
   c.l1_slots = 4;
   c.l2_bytes = 4 * store.format().bytes();
-  BrickCache cache(store, c);
+  GridCache cache_pages(store, c);
+  BrickCache& cache = cache_pages.bricks();
   int differs = 0;
   for (int64_t i = 0; i < store.layout().brick_count(store.layout().finest()); ++i) {
     const BrickKey k = store.layout().key_at(store.layout().finest(), i);
@@ -171,7 +176,8 @@ TEST(BrickCacheConstants, NearConstantBricksCarryTheirStoredValue) {
 }
 
 TEST_F(BrickCacheTest, PinnedSlotsAreNeverEvicted) {
-  BrickCache cache(*store_, small_config(4, 64, store_->format().bytes()));
+  GridCache cache_pages(*store_, small_config(4, 64, store_->format().bytes()));
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   std::vector<BrickHandle> pinned;
   for (int i = 0; i < 4; ++i) pinned.push_back(cache.fetch(keys[size_t(i)]));
@@ -189,7 +195,8 @@ TEST_F(BrickCacheTest, PinnedSlotsAreNeverEvicted) {
 TEST_F(BrickCacheTest, UploadsRespectThePerFrameBudget) {
   CacheConfig c = small_config(64, 64, store_->format().bytes());
   c.upload_bricks_per_frame = 5;
-  BrickCache cache(*store_, c);
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   cache.frame_begin();
   for (int i = 0; i < 20; ++i) cache.request(keys[size_t(i)], 1.0f);
@@ -209,7 +216,8 @@ TEST_F(BrickCacheTest, ABrickLoadedAndWaitingForTheUploadBudgetIsNotRequestedAga
   // must not queue a second load (from L2), which would be read and dropped.
   CacheConfig c = small_config(64, 64, store_->format().bytes());
   c.upload_bricks_per_frame = 4;
-  BrickCache cache(*store_, c);
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   constexpr int kBricks = 16;
   std::vector<BrickRequest> asked;
@@ -228,7 +236,8 @@ TEST_F(BrickCacheTest, ABrickWithNoUnpinnedSlotDoesNotHoldBackTheOthers) {
   // the bricks of the other shards, queued behind it, are placed this frame all the same.
   CacheConfig c = small_config(64, 512, store_->format().bytes());
   c.loader_threads = 1;  // the loader serves by priority: the blocked brick first
-  BrickCache cache(*store_, c);
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   std::vector<BrickHandle> pins;
   size_t next = 0;
@@ -266,7 +275,8 @@ TEST_F(BrickCacheTest, WaitIdleReturnsOnlyOnceEveryBrickItWasAskedForIsResident)
   // pool's 4 shards of 16 slots, so under LRU it never pushes out a brick of its own.
   CacheConfig c = small_config(64, 1024, store_->format().bytes());
   c.loader_threads = 4;
-  BrickCache cache(*store_, c);
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   constexpr size_t kBatch = 16;
   ASSERT_GT(keys.size(), kBatch + c.l1_slots);  // batches that come back after the pool has turned over
@@ -285,7 +295,8 @@ TEST_F(BrickCacheTest, WaitIdleReturnsOnlyOnceEveryBrickItWasAskedForIsResident)
 TEST_F(BrickCacheTest, RequestsNotRenewedAreDroppedAtFrameEnd) {
   CacheConfig c = small_config(512, 512, store_->format().bytes());
   c.loader_threads = 1;
-  BrickCache cache(*store_, c);
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   cache.frame_begin();
   for (const auto& k : keys) cache.request(k, 0);
@@ -304,7 +315,8 @@ TEST_F(BrickCacheTest, NeverExceedsItsBudgetsUnderConcurrentRandomLoad) {
   CacheConfig c = small_config(24, 40, brick);
   c.l2_policy = "s3fifo";
   c.l1_policy = "clock";
-  BrickCache cache(*store_, c);
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   std::atomic<bool> done{false};
   std::atomic<uint64_t> checks{0};
@@ -350,7 +362,8 @@ TEST_F(BrickCacheTest, NeverExceedsItsBudgetsUnderConcurrentRandomLoad) {
 }
 
 TEST_F(BrickCacheTest, VisibilityMarksAppearAfterTheFrame) {
-  BrickCache cache(*store_, small_config(8, 8, store_->format().bytes()));
+  GridCache cache_pages(*store_, small_config(8, 8, store_->format().bytes()));
+  BrickCache& cache = cache_pages.bricks();
   const BrickKey k{1, 0, 1, 0};
   cache.frame_begin();
   cache.mark_visible(k, true);
@@ -366,7 +379,8 @@ TEST_F(BrickCacheTest, VisibilityMarksAppearAfterTheFrame) {
 TEST_F(BrickCacheTest, LruFrameProtectsBricksUsedThisFrame) {
   CacheConfig c = small_config(16, 64, store_->format().bytes());
   c.l1_policy = "lru-frame";
-  BrickCache cache(*store_, c);
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
   cache.frame_begin();
   for (int i = 0; i < 16; ++i) cache.fetch(keys[size_t(i)]);  // fill the pool in this frame
@@ -382,11 +396,12 @@ TEST_F(BrickCacheTest, LruFrameProtectsBricksUsedThisFrame) {
 }
 
 TEST_F(BrickCacheTest, KeysOutsideTheStoreAreClearErrors) {
-  BrickCache cache(*store_, small_config(8, 8, store_->format().bytes()));
+  GridCache cache_pages(*store_, small_config(8, 8, store_->format().bytes()));
+  BrickCache& cache = cache_pages.bricks();
   const BrickKey outside{9, 0, 0, 0};
   BrickHandle h = cache.lookup(outside);
   EXPECT_TRUE(h.failed());
-  EXPECT_NE(h.error().find("outside the store"), std::string::npos) << h.error();
+  EXPECT_NE(h.error().find("outside the grid's"), std::string::npos) << h.error();
   try {
     cache.fetch(outside);
     FAIL();
@@ -400,7 +415,7 @@ TEST_F(BrickCacheTest, BudgetsSmallerThanOneBrickAreConfigurationErrors) {
   CacheConfig c;
   c.l1_bytes = 100;
   try {
-    BrickCache cache(*store_, c);
+    PageCache cache(*store_, c);
     FAIL();
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), Errc::invalid_argument);
@@ -409,14 +424,14 @@ TEST_F(BrickCacheTest, BudgetsSmallerThanOneBrickAreConfigurationErrors) {
   c = CacheConfig{};
   c.l2_bytes = 100;
   try {
-    BrickCache cache(*store_, c);
+    PageCache cache(*store_, c);
     FAIL();
   } catch (const Error& e) {
     EXPECT_EQ(e.field(), "l2_bytes");
   }
   c = CacheConfig{};
   c.l1_policy = "opt";
-  EXPECT_THROW(BrickCache(*store_, c), Error);
+  EXPECT_THROW(PageCache(*store_, c), Error);
 }
 
 TEST_F(BrickCacheTest, ShutdownWithRequestsInFlightIsClean) {
@@ -424,7 +439,8 @@ TEST_F(BrickCacheTest, ShutdownWithRequestsInFlightIsClean) {
   for (int round = 0; round < 5; ++round) {
     CacheConfig c = small_config(32, 32, store_->format().bytes());
     c.upload_bricks_per_frame = 3;
-    BrickCache cache(*store_, c);
+    GridCache cache_pages(*store_, c);
+    BrickCache& cache = cache_pages.bricks();
     cache.frame_begin();
     for (const auto& k : keys) cache.request(k, 1);
     cache.frame_end();
@@ -438,7 +454,8 @@ TEST_F(BrickCacheTest, RecordsATraceOfEveryAccess) {
   {
     CacheConfig c = small_config(8, 16, store_->format().bytes());
     c.trace_path = dir.file("t.bytrace");
-    BrickCache cache(*store_, c);
+    GridCache cache_pages(*store_, c);
+    BrickCache& cache = cache_pages.bricks();
     cache.frame_begin();
     cache.lookup(keys[0]);
     cache.wait_idle();
@@ -475,9 +492,10 @@ TEST_F(CorruptStoreTest, ACorruptBrickFailsOnceAndOthersStillLoad) {
   std::memcpy(&h, header.data(), header.size());
   const BrickKey bad{h.level, h.x, h.y, h.z};
 
-  BrickStore store(dir.file("s"));
+  Store store(dir.file("s"));
   CacheConfig c = small_config(64, 64, store.format().bytes());
-  BrickCache cache(store, c);
+  GridCache cache_pages(store, c);
+  BrickCache& cache = cache_pages.bricks();
   cache.frame_begin();
   const BrickKey good = bad.x > 0 ? BrickKey{bad.level, bad.x - 1, bad.y, bad.z} : BrickKey{bad.level, bad.x + 1, bad.y, bad.z};
   cache.lookup(bad);
@@ -498,28 +516,6 @@ TEST_F(CorruptStoreTest, ACorruptBrickFailsOnceAndOthersStillLoad) {
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), Errc::corrupt);
   }
-}
-
-TEST(NodePool, AllocatesEvictsLeastRecentlyUsedAndRespectsPins) {
-  NodePool pool(4, 64);
-  for (uint64_t id = 0; id < 4; ++id) {
-    const uint32_t s = pool.allocate(id);
-    ASSERT_NE(s, kNoSlot);
-    std::memset(pool.data(s), int(id), 64);
-    pool.publish(s);
-  }
-  const uint32_t s0 = pool.lookup(0);  // pin 0, and make it recent
-  ASSERT_NE(s0, kNoSlot);
-  EXPECT_EQ(pool.data(s0)[10], std::byte{0});
-  std::optional<uint64_t> evicted;
-  const uint32_t s4 = pool.allocate(4, &evicted);
-  ASSERT_NE(s4, kNoSlot);
-  EXPECT_EQ(evicted, std::optional<uint64_t>(1));
-  pool.publish(s4);
-  EXPECT_EQ(pool.lookup(1), kNoSlot);
-  pool.unpin(s0);
-  EXPECT_EQ(pool.resident(), 4u);
-  EXPECT_EQ(pool.counters().evictions, 1u);
 }
 
 }  // namespace

@@ -102,7 +102,9 @@ TEST(Trace, MalformedFilesAreFormatErrors) {
   std::ofstream(dir.file("z.txt")) << "1 2\nthree 4\n";
   expect_format_error(dir.file("z.txt"), "line 2");
   std::ofstream(dir.file("w.txt")) << "1 2 3\n";
-  expect_format_error(dir.file("w.txt"), "unexpected '3'");
+  expect_format_error(dir.file("w.txt"), "line 1: unknown record kind '3'");
+  std::ofstream(dir.file("v.txt")) << "1 2 tet_cluster 4\n";
+  expect_format_error(dir.file("v.txt"), "unexpected '4'");
   EXPECT_THROW(read_trace(dir.file("absent.bytrace")), Error);
 }
 

@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "preprocess/builder_test_util.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 #include "storage/lmdb_env.h"
 #include "test_util.h"
 
@@ -180,7 +180,7 @@ TEST(CliStore, DirectoriesThatAreNotStoresAndNewerFormatsAreRefused) {
   }
   r = brickyard("info " + dir.file("s"));
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_TRUE(contains(r.output, "store format version 99 is newer than this build reads (1)")) << r.output;
+  EXPECT_TRUE(contains(r.output, "store format version 99 is newer than this build reads (2)")) << r.output;
 }
 
 TEST(CliStore, VerifyNamesACorruptedBrick) {
@@ -233,7 +233,7 @@ TEST(CliStore, KilledImportLeavesAnIncompleteStoreAndTheRerunEqualsACleanBuild) 
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(contains(r.output, "interrupted earlier build was discarded and rebuilt")) << r.output;
   ASSERT_EQ(brickyard("-q import field:fbm --size 256 --type u8 --brick-size 16 --out " + dir.file("clean")).exit_code, 0);
-  EXPECT_TRUE(testing::all_records(BrickStore(store)) == testing::all_records(BrickStore(dir.file("clean"))));
+  EXPECT_TRUE(testing::all_records(Store(store)) == testing::all_records(Store(dir.file("clean"))));
 }
 
 }  // namespace

@@ -7,7 +7,7 @@
 #include "fields/field.h"
 #include "fields/grid.h"
 #include "preprocess/export.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 
 namespace brickyard::testing {
 
@@ -61,7 +61,7 @@ Grid<T> halve(const Grid<T>& g) {
 }
 
 template <typename T>
-Grid<T> read_level(const BrickStore& store, int level) {
+Grid<T> read_level(const Store& store, int level) {
   const VoxelBox region = export_region(store, level, std::nullopt);
   Grid<T> g{region.size(), {}};
   g.v.reserve(size_t(volume(g.dims)));
@@ -73,7 +73,7 @@ Grid<T> read_level(const BrickStore& store, int level) {
 }
 
 /// Every stored record, for comparing two builds byte for byte.
-inline std::vector<std::pair<uint64_t, std::vector<std::byte>>> all_records(const BrickStore& store) {
+inline std::vector<std::pair<uint64_t, std::vector<std::byte>>> all_records(const Store& store) {
   std::vector<std::pair<uint64_t, std::vector<std::byte>>> out;
   auto txn = store.begin_read();
   store.for_each_record(txn, [&](const BrickKey& k, std::span<const std::byte> r) {

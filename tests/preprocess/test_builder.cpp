@@ -32,7 +32,7 @@ void expect_pyramid_matches(const std::string& field_name, const Vec3s& dims, co
   auto field = make_field(field_name);
   auto source = make_field_source(make_field(field_name), dims, ValueTypeOf<T>::value);
   build_store(*source, dir.file("s"), options);
-  BrickStore store(dir.file("s"));
+  Store store(dir.file("s"));
   Grid<T> expected = testing::sample<T>(*field, dims);
   for (int level = store.layout().finest(); level >= 0; --level) {
     const Grid<T> got = testing::read_level<T>(store, level);
@@ -53,8 +53,8 @@ TEST(Builder, ApronsReplicateNeighboursAndNodeRangesCoverTrilinearCells) {
   const Vec3s dims{30, 21, 19};
   auto source = make_field_source(make_field("fbm"), dims, ValueType::u16);
   build_store(*source, dir.file("s"), small_bricks(8, 2));
-  BrickStore store(dir.file("s"));
-  const StoreLayout& l = store.layout();
+  Store store(dir.file("s"));
+  const GridLayout& l = store.layout();
   const BrickFormat& f = store.format();
   std::vector<std::byte> buffer(f.bytes());
   for (int level = 0; level < l.levels; ++level) {
@@ -89,8 +89,8 @@ TEST(Builder, ConstantBricksHaveNoPayloadAndBackgroundOnesAreEmpty) {
   testing::TempDir dir;
   auto source = make_field_source(make_field("sparse-blobs"), {64, 64, 64}, ValueType::u8);
   const BuildResult r = build_store(*source, dir.file("s"), small_bricks());
-  BrickStore store(dir.file("s"));
-  const StoreLayout& l = store.layout();
+  Store store(dir.file("s"));
+  const GridLayout& l = store.layout();
   auto txn = store.begin_read();
   int64_t constant = 0, empty = 0, stored = 0;
   for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
@@ -128,7 +128,7 @@ TEST(Builder, ManifestDescribesTheVolume) {
   auto field = make_field("sphere");
   auto source = make_field_source(make_field("sphere"), {50, 40, 30}, ValueType::u8);
   const BuildResult r = build_store(*source, dir.file("s"), small_bricks(16));
-  const Manifest m = BrickStore(dir.file("s")).manifest();
+  const Manifest m = Store(dir.file("s")).manifest();
   EXPECT_TRUE(m.complete);
   EXPECT_EQ(m.dims, Vec3s(50, 40, 30));
   EXPECT_EQ(m.levels, 3);
@@ -154,7 +154,7 @@ TEST(Builder, RawFileRoundTripsBitExactlyThroughTheStore) {
   spec.type = info.type;
   auto source = open_raw_source(dir.file("t.raw"), spec);
   build_store(*source, dir.file("s"), small_bricks(16));
-  BrickStore store(dir.file("s"));
+  Store store(dir.file("s"));
   const RawVolumeInfo out = export_raw(store, store.layout().finest(), export_region(store, store.layout().finest(), {}),
                                        dir.file("back.raw"));
   EXPECT_EQ(testing::read_file(dir.file("back.raw")), testing::read_file(dir.file("t.raw")));
@@ -189,7 +189,7 @@ TEST(Builder, BigEndianRawAndHeaderBytesAreHonoured) {
   spec.header_bytes = 8;
   auto source = open_raw_source(dir.file("be.raw"), spec);
   build_store(*source, dir.file("s"), small_bricks());
-  const Grid<uint16_t> g = testing::read_level<uint16_t>(BrickStore(dir.file("s")), 1);
+  const Grid<uint16_t> g = testing::read_level<uint16_t>(Store(dir.file("s")), 1);
   EXPECT_EQ(g.v, values);
 }
 
@@ -197,7 +197,7 @@ TEST(Builder, OptionsChangeEncodingButNotDecodedData) {
   auto build = [](const BuildOptions& o, testing::TempDir& dir) {
     auto source = make_field_source(make_field("marschner-lobb"), {33, 33, 33}, ValueType::f32);
     build_store(*source, dir.file("s"), o);
-    return testing::read_level<float>(BrickStore(dir.file("s")), 2).v;
+    return testing::read_level<float>(Store(dir.file("s")), 2).v;
   };
   testing::TempDir a, b, c;
   BuildOptions hc = small_bricks(16);
@@ -216,7 +216,7 @@ TEST(Builder, MinAndMaxFiltersPreserveExtremes) {
   auto field = make_field("menger", {{"levels", 3}});
   auto source = make_field_source(make_field("menger", {{"levels", 3}}), {27, 27, 27}, ValueType::u8);
   build_store(*source, dir.file("s"), o);
-  BrickStore store(dir.file("s"));
+  Store store(dir.file("s"));
   const Grid<uint8_t> fine = testing::read_level<uint8_t>(store, store.layout().finest());
   const Grid<uint8_t> coarse = testing::read_level<uint8_t>(store, store.layout().finest() - 1);
   for (int64_t z = 0; z < coarse.dims.z; ++z)
@@ -243,7 +243,7 @@ TEST(Builder, ClampRangeAndConstantTolerance) {
   loose.constant_tolerance = 255;
   auto source2 = make_field_source(make_field("sphere"), {32, 32, 32}, ValueType::u8);
   build_store(*source2, dir.file("t"), loose);
-  EXPECT_EQ(BrickStore(dir.file("t")).record_count(), 0u);  // everything within tolerance
+  EXPECT_EQ(Store(dir.file("t")).record_count(), 0u);  // everything within tolerance
 }
 
 TEST(Builder, ResultDoesNotDependOnThreadCount) {
@@ -253,7 +253,7 @@ TEST(Builder, ResultDoesNotDependOnThreadCount) {
       auto source = make_field_source(make_field("fbm"), {48, 40, 36}, ValueType::u16);
       build_store(*source, dir.file(name), small_bricks());
     });
-    return testing::all_records(BrickStore(dir.file(name)));
+    return testing::all_records(Store(dir.file(name)));
   };
   EXPECT_TRUE(build(1, "one") == build(2, "two"));
 }
@@ -284,7 +284,7 @@ TEST(Builder, AnInterruptedBuildIsIncompleteAndTheNextRunRebuildsIdentically) {
   EXPECT_THROW(build_store(failing, s, small_bricks()), Error);
   EXPECT_EQ(probe_store(s), StoreState::incomplete);
   try {
-    BrickStore store(s);
+    Store store(s);
     FAIL() << "opened an incomplete store";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("incomplete"), std::string::npos) << e.what();
@@ -294,8 +294,8 @@ TEST(Builder, AnInterruptedBuildIsIncompleteAndTheNextRunRebuildsIdentically) {
   EXPECT_TRUE(r.rebuilt_incomplete);
   auto source = make_field_source(make_field("fbm"), {40, 40, 40}, ValueType::u8);
   build_store(*source, dir.file("clean"), small_bricks());
-  EXPECT_TRUE(testing::all_records(BrickStore(s)) == testing::all_records(BrickStore(dir.file("clean"))));
-  EXPECT_EQ(BrickStore(s).manifest().to_json(), BrickStore(dir.file("clean")).manifest().to_json());
+  EXPECT_TRUE(testing::all_records(Store(s)) == testing::all_records(Store(dir.file("clean"))));
+  EXPECT_EQ(Store(s).manifest().to_json(), Store(dir.file("clean")).manifest().to_json());
 }
 
 TEST(Builder, RerunsAreIdempotentAndDifferentParametersNeedForce) {
@@ -312,7 +312,7 @@ TEST(Builder, RerunsAreIdempotentAndDifferentParametersNeedForce) {
   other.force = true;
   const BuildResult r = run(other);
   EXPECT_FALSE(r.up_to_date);
-  EXPECT_EQ(BrickStore(s).format().brick_size, 16);
+  EXPECT_EQ(Store(s).format().brick_size, 16);
 }
 
 TEST(Builder, RefusesToOverwriteSomethingThatIsNotAStore) {

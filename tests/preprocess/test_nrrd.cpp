@@ -48,7 +48,7 @@ std::vector<T> import_finest(const std::string& nrrd, const std::string& store_d
   BuildOptions o;
   o.brick_size = 8;
   build_store(*source, store_dir, o);
-  BrickStore store(store_dir);
+  Store store(store_dir);
   return testing::read_level<T>(store, store.layout().finest()).v;
 }
 
@@ -61,7 +61,7 @@ TEST(Nrrd, AttachedRawUnsignedChar) {
          "spacings: 0.5 1 2\nspace origin: (1,2,3)\n\n"
       << to_bytes(v);
   EXPECT_EQ(import_finest<uint8_t>(dir.file("a.nrrd"), dir.file("s")), v);
-  const Manifest m = BrickStore(dir.file("s")).manifest();
+  const Manifest m = Store(dir.file("s")).manifest();
   EXPECT_EQ(m.spacing, Vec3d(0.5, 1, 2));
   EXPECT_EQ(m.origin, Vec3d(1, 2, 3));
   EXPECT_NE(m.source.find("\"kind\":\"nrrd\""), std::string::npos);
@@ -75,7 +75,7 @@ TEST(Nrrd, DetachedBigEndianUnsignedShortWithSpaceDirections) {
   std::ofstream(dir.file("d.nhdr")) << "NRRD0005\ntype: uint16\ndimension: 3\nsizes: 9 4 3\nendian: big\nencoding: raw\n"
                                        "space directions: (0,0,3) (0,4,0) (2,0,0)\ndata file: d.raw\n";
   EXPECT_EQ(import_finest<uint16_t>(dir.file("d.nhdr"), dir.file("s")), v);
-  EXPECT_EQ(BrickStore(dir.file("s")).manifest().spacing, Vec3d(3, 4, 2));
+  EXPECT_EQ(Store(dir.file("s")).manifest().spacing, Vec3d(3, 4, 2));
 }
 
 TEST(Nrrd, GzipFloatStreamsAndSignedShortConvertsToFloat) {

@@ -22,7 +22,7 @@
 #include "preprocess/builder.h"
 #include "preprocess/export.h"
 #include "preprocess/volume_source.h"
-#include "storage/brick_store.h"
+#include "storage/store.h"
 #include "test_util.h"
 
 namespace brickyard {
@@ -61,7 +61,7 @@ vdb::FloatGrid::Ptr sphere(const std::string& name) {
 }
 
 // The finest level of a store, densely, x fastest.
-std::vector<float> finest_voxels(const BrickStore& store) {
+std::vector<float> finest_voxels(const Store& store) {
   const int level = store.layout().finest();
   std::vector<float> out;
   for_each_region_slab(store, level, export_region(store, level, std::nullopt),
@@ -74,7 +74,7 @@ std::vector<float> finest_voxels(const BrickStore& store) {
 
 // Every voxel of the store's finest level against the grid at index_min + voxel.
 template <typename GridT>
-void expect_store_holds_grid(const BrickStore& store, const GridT& grid) {
+void expect_store_holds_grid(const Store& store, const GridT& grid) {
   const vdb::CoordBBox bbox = grid.evalActiveVoxelBoundingBox();
   const Vec3s d = store.manifest().dims;
   ASSERT_EQ(d, Vec3s(bbox.dim().x(), bbox.dim().y(), bbox.dim().z()));
@@ -126,7 +126,7 @@ TEST(VdbImport, FogVolumeVoxelsMatchTheGridExactly) {
 
   const BuildResult built = build_store(*source, dir.file("store"), bricks_of(16));
   EXPECT_GT(built.manifest.stats.back().empty, 0) << "the corners of the box are background";
-  BrickStore store(dir.file("store"));
+  Store store(dir.file("store"));
   EXPECT_EQ(store.manifest().origin, source->origin());
   expect_store_holds_grid(store, *grid);
 
@@ -153,12 +153,12 @@ TEST(VdbImport, ActiveTilesBecomeConstantNodesWithoutRecords) {
 
   auto source = open_vdb_source(dir.file("tiles.vdb"), "tiles");
   build_store(*source, dir.file("store"), bricks_of(16));
-  BrickStore store(dir.file("store"));
+  Store store(dir.file("store"));
   expect_store_holds_grid(store, *grid);
 
   // Which finest bricks must be constant follows from the grid: every voxel of the brick and
   // its apron (replicated at the volume's faces) has one value.
-  const StoreLayout& layout = store.layout();
+  const GridLayout& layout = store.layout();
   const int level = layout.finest();
   const Vec3s d = layout.dims, nb = layout.level_bricks(level);
   const vdb::Coord index_min = grid->evalActiveVoxelBoundingBox().min();
@@ -241,7 +241,7 @@ TEST(VdbExport, LevelSetRoundTripKeepsActiveVoxelsBackgroundAndClass) {
   auto source = open_vdb_source(dir.file("ls.vdb"), "ls");
   EXPECT_EQ(source->background(), 0.75);
   build_store(*source, dir.file("store"), bricks_of(16));
-  BrickStore store(dir.file("store"));
+  Store store(dir.file("store"));
   EXPECT_TRUE(contains(store.manifest().source, "\"grid_class\":\"level_set\""));
   const int finest = store.layout().finest();
   export_vdb(store, finest, export_region(store, finest, std::nullopt), dir.file("out.vdb"), "");
@@ -334,7 +334,7 @@ TEST(VdbImport, DoubleAndInt32GridsConvertToFloat) {
   EXPECT_EQ(dsrc->background(), double(0.1f));  // as stored in f32, so empty bricks are found
   EXPECT_TRUE(dsrc->may_contain_nonfinite());
   build_store(*dsrc, dir.file("d"), bricks_of(8));
-  BrickStore dstore(dir.file("d"));
+  Store dstore(dir.file("d"));
   expect_store_holds_grid(dstore, *dgrid);
   EXPECT_TRUE(contains(dstore.manifest().source, "\"value_type\":\"double\""));
 
@@ -345,7 +345,7 @@ TEST(VdbImport, DoubleAndInt32GridsConvertToFloat) {
   EXPECT_EQ(range->lo, -12345.0);
   EXPECT_EQ(range->hi, double(1 << 24));
   build_store(*isrc, dir.file("i"), bricks_of(8));
-  BrickStore istore(dir.file("i"));
+  Store istore(dir.file("i"));
   expect_store_holds_grid(istore, *igrid);
   EXPECT_EQ(istore.manifest().max_value, double(1 << 24));
   EXPECT_EQ(istore.manifest().background, -7.0);
@@ -356,7 +356,7 @@ TEST(VdbExport, StoresFromOtherSourcesExportAsDensityAtVoxelCoordinates) {
   const Vec3s dims{21, 14, 9};
   auto source = make_field_source(make_field("gyroid"), dims, ValueType::u8);
   build_store(*source, dir.file("store"), bricks_of(8));
-  BrickStore store(dir.file("store"));
+  Store store(dir.file("store"));
   const int level = store.layout().finest();
   const VoxelBox all = export_region(store, level, std::nullopt);
   std::vector<uint8_t> voxels;
@@ -445,7 +445,7 @@ TEST(VdbExport, ErrorsLeaveNoFileBehind) {
   write_grids(dir.file("ls.vdb"), {grid});
   auto source = open_vdb_source(dir.file("ls.vdb"), "");
   build_store(*source, dir.file("store"), bricks_of(16));
-  BrickStore store(dir.file("store"));
+  Store store(dir.file("store"));
   const int levels = store.layout().levels;
 
   Error e = error_of([&] { export_region(store, levels, std::nullopt); });

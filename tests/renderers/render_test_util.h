@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "renderers/common/metrics.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 
 namespace brickyard::testing {
 

@@ -14,7 +14,7 @@
 #include "core/error.h"
 #include "core/image.h"
 #include "core/plot.h"
-#include "renderers/common/bench_report.h"
+#include "report/bench_report.h"
 #include "test_util.h"
 
 namespace brickyard {

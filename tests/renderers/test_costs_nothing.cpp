@@ -14,9 +14,10 @@
 #include <vector>
 
 #include "cache/trace.h"
+#include "session/grid_cache.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/scene.h"
 #include "test_util.h"
@@ -202,9 +203,9 @@ TEST_F(CostsNothing, RegisteringAndFindingBackEndsConstructsNothing) {
   // What RenderSession does with the scene's back end, with the fakes: only the named one is
   // built, and render_frame calls begin/end once and covers every pixel exactly once.
   const Scene s = scene(kIso + R"(, "backend": {"name": "fake-b", "params": {"knob": 2}})");
-  BrickStore store_(store());
-  BrickCache cache(store_, cache_config(s));
-  RenderContext context(s, cache);
+  Store store_(store());
+  GridCache cache(store_, cache_config(s));
+  RenderContext context(s, store_.dataset(), cache.pages(), &cache.bricks());
   const BackendEntry& entry = registry.find(s.backend);
   std::unique_ptr<Renderer> renderer = entry.create(context, BackendParams(entry.info, s.backend_params, s.file));
   EXPECT_EQ(a.constructed, 0);
@@ -225,7 +226,7 @@ TEST_F(CostsNothing, RegisteringAndFindingBackEndsConstructsNothing) {
 }
 
 TEST_F(CostsNothing, RenderSessionBuildsTheBackEndTheSceneOrTheOptionsName) {
-  // RenderSession takes its back ends from builtin_backends() and cannot be handed a registry,
+  // RenderSession takes its back ends from backends() and cannot be handed a registry,
   // so construction counts cannot be observed here; what can be: the one it holds.
   const Scene s = scene(kIso + R"(, "backend": {"name": "reference", "params": {"step": 0.25}})");
   RenderSession session(s);
@@ -241,7 +242,7 @@ TEST_F(CostsNothing, RenderSessionBuildsTheBackEndTheSceneOrTheOptionsName) {
 // --- (d) nothing fetched outside the value range that can contribute ---------------------------
 
 TEST_F(CostsNothing, IsoFetchesOnlyBricksWhoseRangeHoldsTheIsovalue) {
-  BrickStore s(store());
+  Store s(store());
   const int finest = s.layout().finest();
   const double iso = 0.05;
   // Some bricks hold the isovalue, some do not (inside and outside the surface).
@@ -279,7 +280,7 @@ TEST_F(CostsNothing, IsoFetchesOnlyBricksWhoseRangeHoldsTheIsovalue) {
 
 TEST_F(CostsNothing, NormalizedIsovaluesAreMappedBeforeBricksAreChosen) {
   // "values": "normalized": the filter uses the isovalue in the store's units.
-  BrickStore s(store());
+  Store s(store());
   const double lo = s.manifest().min_value, hi = s.manifest().max_value;
   const double iso = 0.05, fraction = (iso - lo) / (hi - lo);
   const Scene sc = scene(R"("values": "normalized", "mode": "iso", "isosurfaces": [{"value": )" + std::to_string(fraction) + "}]", 64);
@@ -297,7 +298,7 @@ TEST_F(CostsNothing, NormalizedIsovaluesAreMappedBeforeBricksAreChosen) {
 }
 
 TEST_F(CostsNothing, DvrFetchesOnlyBricksTheTransferFunctionMakesVisible) {
-  BrickStore s(store());
+  Store s(store());
   const int finest = s.layout().finest();
   // Opacity only in a band around the surface: the inside and the outside are invisible.
   const std::string tf = R"("mode": "dvr", "transfer_function": {"points": [
@@ -343,7 +344,7 @@ TEST_F(CostsNothing, DvrFetchesOnlyBricksTheTransferFunctionMakesVisible) {
 // differences at faces, or a wider apron), or drop it if the scene format documents the
 // exception.
 TEST_F(CostsNothing, DifferenceNormalsFetchOnlyBricksThatCanContribute) {
-  BrickStore s(store());
+  Store s(store());
   const std::string band = R"("mode": "dvr", "transfer_function": {"points": [
       {"value": -1, "opacity": 0}, {"value": -0.04, "opacity": 0}, {"value": 0.0, "opacity": 0.3},
       {"value": 0.04, "opacity": 0}, {"value": 1, "opacity": 0}]})";

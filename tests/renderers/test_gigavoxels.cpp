@@ -22,7 +22,7 @@
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/metrics.h"
 #include "renderers/common/pixel.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 #include "renderers/common/scene.h"
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/cell_groups.h"
@@ -1161,7 +1161,7 @@ TEST_F(GigaVoxels, ApproximateModeConvergesToExactModeAfterACameraJump) {
   for (; frames < 40 && rmse > 1e-6; ++frames) {
     approx.render(1, fb, kAll);
     ASSERT_TRUE(all_finite(fb));
-    approx.cache().wait_idle();
+    approx.bricks().wait_idle();
     rmse = compare_frames(fb, want, 1.0).rmse;
   }
   EXPECT_LE(rmse, 1e-6);
@@ -1212,21 +1212,21 @@ TEST_F(GigaVoxels, BrickPoolAndCacheShareTheL1BudgetAndStillConverge) {
   for (; frames < 60 && rmse > 1e-6; ++frames) {
     st = approx.render(0, fb, kAll);
     most_requests = std::max(most_requests, st.requests);
-    approx.cache().wait_idle();
+    approx.bricks().wait_idle();
     rmse = compare_frames(fb, want, 1.0).rmse;
   }
   EXPECT_LE(rmse, 1e-6) << "after " << frames << " frames";
   EXPECT_GT(frames, 1);  // the first frame had nothing loaded
   EXPECT_GT(most_requests, 0u);
-  EXPECT_LE(most_requests, approx.cache().pool_slots() / 2);
-  const uint64_t staged = approx.cache().stats().l1_pool_bytes, pool = uint64_t(st.backend_value("brick_pool_bytes"));
+  EXPECT_LE(most_requests, approx.bricks().pool_slots() / 2);
+  const uint64_t staged = approx.bricks().stats().l1_pool_bytes, pool = uint64_t(st.backend_value("brick_pool_bytes"));
   EXPECT_LT(staged, budget / 4);
   EXPECT_LE(staged + pool, budget);
   EXPECT_GT(staged + pool, budget * 99 / 100);  // the pool takes what the cache's L1 left
 
   RenderSession by_hand(sc, backend_options("gigavoxels", {{"brick_slots", 100}}));
   by_hand.render(0, fb, kAll);
-  EXPECT_EQ(by_hand.cache().stats().l1_pool_bytes, budget / by_hand.cache().format().bytes() * by_hand.cache().format().bytes());
+  EXPECT_EQ(by_hand.bricks().stats().l1_pool_bytes, budget / by_hand.bricks().shape().bytes() * by_hand.bricks().shape().bytes());
 }
 
 TEST_F(GigaVoxels, OnlyIsoBricksKeepTheDifferencesItsSearchReads) {
@@ -1268,13 +1268,13 @@ TEST_F(GigaVoxels, ABrickTheLoaderAskedForIsCopiedWhenItArrivesAndReadOnce) {
   int frames = 0;
   for (; frames < 200; ++frames) {
     st = approx.render(0, fb, kAll);
-    approx.cache().wait_idle();
+    approx.bricks().wait_idle();
     if (st.backend_value("feedback_requests") == 0) break;
   }
   const double bricks = st.backend_value("bricks_in_use");
   ASSERT_LT(frames, 200);
   ASSERT_GT(bricks, 20 * budget);  // many frames' worth
-  const CacheStats cs = approx.cache().stats();
+  const CacheStats cs = approx.bricks().stats();
   EXPECT_EQ(cs.l2.hits, 0u) << "bricks loaded into L1 again";
   EXPECT_EQ(cs.l1.inserts, cs.l3.hits);  // l3.hits: bricks read from the store
   EXPECT_LE(frames, int(bricks / budget * 2) + 12) << bricks << " bricks";
@@ -1286,14 +1286,14 @@ TEST_F(GigaVoxels, AnL1OfAFewBricksStillLoadsTheVolume) {
   // and call the empty image converged).
   Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.5})", 32);
   RenderSession probe(sc, backend_options("gigavoxels"));
-  sc.cache.l1_bytes = 6 * probe.cache().format().bytes();
+  sc.cache.l1_bytes = 6 * probe.bricks().shape().bytes();
   RenderSession approx(sc, backend_options("gigavoxels"));
-  ASSERT_EQ(approx.cache().pool_slots(), 1u);
+  ASSERT_EQ(approx.bricks().pool_slots(), 1u);
   FrameBuffers fb;
   FrameStats st;
   for (int frame = 0; frame < 12; ++frame) {
     st = approx.render(0, fb, kAll);
-    approx.cache().wait_idle();
+    approx.bricks().wait_idle();
   }
   EXPECT_EQ(st.backend_value("bricks_in_use"), st.backend_value("brick_slots")) << "the pool fills";
 }

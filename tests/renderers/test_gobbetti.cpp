@@ -12,7 +12,7 @@
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
 #include "renderers/common/metrics.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 #include "renderers/common/scene.h"
 #include "renderers/render_test_util.h"
 #include "test_util.h"
@@ -92,12 +92,12 @@ TEST_F(Gobbetti, WorkingSetNeverExceedsThePoolAndASmallPoolDegradesWithoutHoles)
   FrameBuffers fine;
   const FrameStats fine_stats = ample.render(0, fine, kAll);
   RenderSession tight(scene(sphere_iso, 64, "48000", "sphere.store"), backend_options("gobbetti"));
-  ASSERT_LT(tight.cache().pool_slots(), fine_stats.backend_value("working_set"));
+  ASSERT_LT(tight.bricks().pool_slots(), fine_stats.backend_value("working_set"));
   FrameBuffers coarse;
   for (int f = 0; f < 30; ++f) {
     const FrameStats st = tight.render(0, coarse, kAll);
-    tight.cache().wait_idle();
-    EXPECT_LE(st.backend_value("working_set"), double(tight.cache().pool_slots()));
+    tight.bricks().wait_idle();
+    EXPECT_LE(st.backend_value("working_set"), double(tight.bricks().pool_slots()));
     ASSERT_TRUE(all_finite(coarse));
   }
   // Coarser, but no holes: wherever the full-resolution image shows the surface, so does the
@@ -126,7 +126,7 @@ TEST_F(Gobbetti, VisibilityFeedbackNeverCullsWhatTheImageShows) {
     for (int f = 0; f < 8; ++f) {
       FrameBuffers scratch;
       on.render(0, scratch, kAll);
-      on.cache().wait_idle();
+      on.bricks().wait_idle();
     }
     on.settle(0, kAll);
     FrameBuffers a, b;

@@ -20,7 +20,7 @@
 
 #include "core/error.h"
 #include "renderers/gobbetti/spatial_index.h"
-#include "storage/layout.h"
+#include "dataset/grid.h"
 
 namespace brickyard::gobbetti {
 namespace {
@@ -32,7 +32,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 /// A random adaptive cut of about `target` leaves (at most 3/4 of the finest bricks, so that it
 /// stays adaptive): from the root, refine (a) random leaves and (b) the leaf holding a point
 /// near a focus, so that deep leaves sit beside coarse ones.
-std::vector<CutLeaf> random_cut(const StoreLayout& layout, size_t target, std::mt19937_64& rng) {
+std::vector<CutLeaf> random_cut(const GridLayout& layout, size_t target, std::mt19937_64& rng) {
   target = std::min(target, size_t(layout.brick_count(layout.finest())) * 3 / 4);
   std::vector<BrickKey> leaves = {BrickKey{}};
   const double domain = std::ldexp(double(layout.brick_size), layout.finest());
@@ -67,7 +67,7 @@ std::vector<CutLeaf> random_cut(const StoreLayout& layout, size_t target, std::m
 }
 
 /// Every brick of the finest level: the finest uniform cut.
-std::vector<CutLeaf> finest_cut(const StoreLayout& layout) {
+std::vector<CutLeaf> finest_cut(const GridLayout& layout) {
   std::vector<CutLeaf> cut;
   for (int64_t i = 0; i < layout.brick_count(layout.finest()); ++i)
     cut.push_back({layout.key_at(layout.finest(), i), uint32_t(i)});
@@ -84,13 +84,13 @@ struct RefLeaf {
 
 /// The cut seen from the finest brick grid of the whole domain cube (outside cells too).
 struct Reference {
-  StoreLayout layout;
+  GridLayout layout;
   int64_t n = 0;  // cells per axis
   double M = 0, domain = 0;
   std::vector<RefLeaf> leaves;    // the cut's leaves, then the "outside" leaves found
   std::vector<int32_t> cell_leaf; // index into leaves, per finest cell (x fastest)
 
-  Reference(const StoreLayout& l, const std::vector<CutLeaf>& cut) : layout(l) {
+  Reference(const GridLayout& l, const std::vector<CutLeaf>& cut) : layout(l) {
     n = int64_t(1) << layout.finest();
     M = layout.brick_size;
     domain = M * double(n);
@@ -367,7 +367,7 @@ class RayMaker {
 
 /// Checks the tree against the cut: every leaf once with its payload, outside leaves exactly
 /// the missing children, children contiguous and in BrickKey::child order.
-void expect_tree_matches(const SpatialIndex& index, const StoreLayout& layout, const std::vector<CutLeaf>& cut) {
+void expect_tree_matches(const SpatialIndex& index, const GridLayout& layout, const std::vector<CutLeaf>& cut) {
   std::unordered_map<uint64_t, uint32_t> payload_of;
   for (const CutLeaf& c : cut) payload_of[c.key.code()] = c.payload;
   ASSERT_EQ(index.cut_leaf_count(), cut.size());
@@ -472,7 +472,7 @@ void expect_links_match_geometry(const SpatialIndex& index, const Reference& ref
 TEST(GobbettiSpatialIndex, TreeHoldsEveryLeafOfRandomCutsOnceWithItsPayload) {
   std::mt19937_64 rng(11);
   for (const Shape& shape : kShapes) {
-    const StoreLayout layout = StoreLayout::make(shape.dims, shape.brick_size);
+    const GridLayout layout = GridLayout::make(shape.dims, shape.brick_size);
     for (size_t target : {1ul, 20ul, 300ul, 2000ul}) {
       SCOPED_TRACE(::testing::Message() << shape.dims << " M " << shape.brick_size << " target " << target);
       const std::vector<CutLeaf> cut = random_cut(layout, target, rng);
@@ -496,7 +496,7 @@ TEST(GobbettiSpatialIndex, TreeHoldsEveryLeafOfRandomCutsOnceWithItsPayload) {
 TEST(GobbettiSpatialIndex, NeighbourLinksMatchTheLeavesAcrossEachFace) {
   std::mt19937_64 rng(12);
   for (const Shape& shape : kShapes) {
-    const StoreLayout layout = StoreLayout::make(shape.dims, shape.brick_size);
+    const GridLayout layout = GridLayout::make(shape.dims, shape.brick_size);
     for (size_t target : {1ul, 50ul, 600ul, 1500ul}) {
       SCOPED_TRACE(::testing::Message() << shape.dims << " M " << shape.brick_size << " target " << target);
       const std::vector<CutLeaf> cut = random_cut(layout, target, rng);
@@ -511,7 +511,7 @@ TEST(GobbettiSpatialIndex, TraversalVisitsTheLeavesOfAReferenceDdaOnEveryKindOfR
   std::mt19937_64 rng(13);
   constexpr int kRaysPerKind = 500;
   for (const Shape& shape : kShapes) {
-    const StoreLayout layout = StoreLayout::make(shape.dims, shape.brick_size);
+    const GridLayout layout = GridLayout::make(shape.dims, shape.brick_size);
     for (size_t target : {1ul, 80ul, 1000ul}) {
       SCOPED_TRACE(::testing::Message() << shape.dims << " M " << shape.brick_size << " target " << target);
       const std::vector<CutLeaf> cut = random_cut(layout, target, rng);
@@ -533,7 +533,7 @@ TEST(GobbettiSpatialIndex, TraversalVisitsTheLeavesOfAReferenceDdaOnEveryKindOfR
 
 TEST(GobbettiSpatialIndex, TraversalOfTheFinestCutIsTheDda) {
   std::mt19937_64 rng(14);
-  const StoreLayout layout = StoreLayout::make({100, 37, 64}, 8);
+  const GridLayout layout = GridLayout::make({100, 37, 64}, 8);
   const std::vector<CutLeaf> cut = finest_cut(layout);
   SpatialIndex index;
   index.build(layout, cut);
@@ -547,7 +547,7 @@ TEST(GobbettiSpatialIndex, TraversalOfTheFinestCutIsTheDda) {
 
 TEST(GobbettiSpatialIndex, RaysOnFacesEdgesAndCornersFollowTheContract) {
   // One level-1 split of a 2-level layout: the domain is [0, 16]^3, children of size 8.
-  const StoreLayout layout = StoreLayout::make({16, 16, 16}, 8);
+  const GridLayout layout = GridLayout::make({16, 16, 16}, 8);
   ASSERT_EQ(layout.levels, 2);
   std::vector<CutLeaf> cut;
   for (int c = 0; c < 8; ++c) cut.push_back({BrickKey{}.child(c), uint32_t(c)});
@@ -620,7 +620,7 @@ TEST(GobbettiSpatialIndex, OutsideLeavesAreCrossedBecauseCoarseLeavesReachFurthe
   // 100 voxels in x, M = 8: the finest level has 13 bricks (to x = 104), level 3 has 7 (to
   // 112). Refine one level-3 brick at x = 6 and keep its +y neighbour coarse: a ray along +y
   // at x = 108 crosses an outside leaf, then the coarse leaf.
-  const StoreLayout layout = StoreLayout::make({100, 37, 64}, 8);
+  const GridLayout layout = GridLayout::make({100, 37, 64}, 8);
   ASSERT_EQ(layout.levels, 5);
   std::vector<CutLeaf> cut;
   std::vector<BrickKey> todo = {BrickKey{}};
@@ -662,7 +662,7 @@ TEST(GobbettiSpatialIndex, OutsideLeavesAreCrossedBecauseCoarseLeavesReachFurthe
 }
 
 TEST(GobbettiSpatialIndex, VisitorReturningFalseStopsTheWalk) {
-  const StoreLayout layout = StoreLayout::make({100, 37, 64}, 8);
+  const GridLayout layout = GridLayout::make({100, 37, 64}, 8);
   const std::vector<CutLeaf> cut = finest_cut(layout);
   SpatialIndex index;
   index.build(layout, cut);
@@ -675,7 +675,7 @@ TEST(GobbettiSpatialIndex, WalksEndOnExtremeRays) {
   // Tiny and huge direction components, far origins: every walk ends within its bound and
   // reports ordered, non-overlapping, positive pieces.
   std::mt19937_64 rng(15);
-  const StoreLayout layout = StoreLayout::make({200, 130, 90}, 8);
+  const GridLayout layout = GridLayout::make({200, 130, 90}, 8);
   const std::vector<CutLeaf> cut = random_cut(layout, 1500, rng);
   SpatialIndex index;
   index.build(layout, cut);
@@ -700,7 +700,7 @@ TEST(GobbettiSpatialIndex, WalksEndOnExtremeRays) {
 }
 
 TEST(GobbettiSpatialIndex, OneBrickLayoutIsOneLeaf) {
-  const StoreLayout layout = StoreLayout::make({5, 8, 3}, 8);
+  const GridLayout layout = GridLayout::make({5, 8, 3}, 8);
   ASSERT_EQ(layout.levels, 1);
   SpatialIndex index;
   const CutLeaf root{BrickKey{}, 42};
@@ -722,7 +722,7 @@ TEST(GobbettiSpatialIndex, OneBrickLayoutIsOneLeaf) {
 }
 
 TEST(GobbettiSpatialIndex, RejectsOverlapsGapsDuplicatesAndForeignKeys) {
-  const StoreLayout layout = StoreLayout::make({100, 37, 64}, 8);
+  const GridLayout layout = GridLayout::make({100, 37, 64}, 8);
   std::mt19937_64 rng(16);
   std::vector<CutLeaf> cut = random_cut(layout, 200, rng);
   SpatialIndex index;
@@ -771,14 +771,14 @@ TEST(GobbettiSpatialIndex, RejectsOverlapsGapsDuplicatesAndForeignKeys) {
 
 TEST(GobbettiSpatialIndex, RebuildingReusesStorageAndForgetsThePreviousCut) {
   std::mt19937_64 rng(17);
-  const StoreLayout big = StoreLayout::make({200, 130, 90}, 8), small = StoreLayout::make({65, 3, 20}, 8);
+  const GridLayout big = GridLayout::make({200, 130, 90}, 8), small = GridLayout::make({65, 3, 20}, 8);
   SpatialIndex index;
   const std::vector<CutLeaf> large_cut = random_cut(big, 3000, rng);
   index.build(big, large_cut);
   const size_t bytes = index.bytes();
   for (int frame = 0; frame < 4; ++frame) {
     const bool use_small = frame % 2 == 0;
-    const StoreLayout& layout = use_small ? small : big;
+    const GridLayout& layout = use_small ? small : big;
     const std::vector<CutLeaf> cut = random_cut(layout, use_small ? 40 : 2000, rng);
     index.build(layout, cut);
     expect_tree_matches(index, layout, cut);

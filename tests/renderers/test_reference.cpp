@@ -23,13 +23,14 @@
 #include <vector>
 
 #include "cache/brick_cache.h"
+#include "session/grid_cache.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
 #include "renderers/common/grid_walk.h"
 #include "renderers/common/metrics.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 #include "renderers/common/shading.h"
 #include "test_util.h"
 
@@ -326,11 +327,12 @@ TEST(TrilinearSampler, LastSampleGradientIsTheGradientOfSampleWithGradient) {
   o.brick_size = 8;
   auto src = make_field_source(make_field("fbm"), {21, 18, 17}, ValueType::u16);
   build_store(*src, dir.file("fbm"), o);
-  BrickStore store(dir.file("fbm"));
+  Store store(dir.file("fbm"));
   CacheConfig config;
   config.l1_slots = 64;
   config.l2_bytes = 64 * store.format().bytes();
-  BrickCache cache(store, config);
+  GridCache cache_pages(store, config);
+  BrickCache& cache = cache_pages.bricks();
   RayCounters counters;
   const int finest = store.layout().finest();
   TrilinearSampler<uint16_t, float> f(cache, counters, finest), f_with(cache, counters, finest);

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "core/error.h"
-#include "renderers/common/render.h"
+#include "session/render_session.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/scene.h"
 #include "renderers/common/transfer_function.h"
@@ -492,7 +492,7 @@ TEST(Scene, CameraPathFileErrorsNameThatFileAndTheKey) {
 // --- back-end parameters --------------------------------------------------------------------
 
 TEST(BackendParams, DefaultsOverriddenByTheGivenValues) {
-  const BackendInfo& info = builtin_backends().find("raymarch").info;
+  const BackendInfo& info = backends().find("raymarch").info;
   const BackendParams defaults(info, {});
   EXPECT_DOUBLE_EQ(defaults["step"], 0.5);
   const BackendParams p(info, {{"step", 0.25}});
@@ -501,7 +501,7 @@ TEST(BackendParams, DefaultsOverriddenByTheGivenValues) {
 }
 
 TEST(BackendParams, UnknownOrOutOfRangeParameterNamesTheKeyAndTheFile) {
-  const BackendInfo& info = builtin_backends().find("raymarch").info;
+  const BackendInfo& info = backends().find("raymarch").info;
   try {
     BackendParams(info, {{"stepp", 1.0}}, "/scenes/s.json");
     ADD_FAILURE() << "no error";

@@ -28,9 +28,10 @@
 #include <vector>
 
 #include "preprocess/builder.h"
+#include "session/grid_cache.h"
 #include "preprocess/volume_source.h"
-#include "renderers/common/render.h"
-#include "storage/brick_store.h"
+#include "session/render_session.h"
+#include "storage/store.h"
 #include "test_util.h"
 
 namespace brickyard {
@@ -190,10 +191,10 @@ struct Rendered {
 
 /// Renders one frame of `scene` with a camera in world coordinates.
 Rendered render_world(const Scene& scene, const Camera& camera) {
-  BrickStore store(scene.dataset);
-  BrickCache cache(store, cache_config(scene));
-  RenderContext context(scene, cache);
-  const BackendEntry& entry = builtin_backends().find(scene.backend);
+  Store store(scene.dataset);
+  GridCache cache(store, cache_config(scene));
+  RenderContext context(scene, store.dataset(), cache.pages(), &cache.bricks());
+  const BackendEntry& entry = backends().find(scene.backend);
   std::unique_ptr<Renderer> renderer = entry.create(context, BackendParams(entry.info, scene.backend_params));
   FrameSetup setup;
   setup.camera = camera;
@@ -203,7 +204,7 @@ Rendered render_world(const Scene& scene, const Camera& camera) {
   Rendered r;
   r.stats = render_frame(*renderer, context, setup, r.fb);
   renderer.reset();
-  r.cache = cache.stats();
+  r.cache = cache.pages().stats();
   r.camera = camera;
   r.world = context.geometry().world;
   return r;
@@ -409,8 +410,8 @@ TEST_F(Stability, IsovaluesEqualToVoxelValuesAndConstantCellsAtTheIsovalue) {
   const SeparableField f{{17, 17, 17}, [](int a, int64_t i) { return a == 2 ? double(std::min<int64_t>(i, 8)) : 0.0; }};
   const std::string ds = build_array(*dir_, "plateau", f.dims, f.values());
   {
-    BrickStore store(ds);
-    const StoreLayout& l = store.layout();
+    Store store(ds);
+    const GridLayout& l = store.layout();
     int constant_at_iso = 0;
     for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
       const NodeRecord& n = store.nodes().at(l.key_at(l.finest(), i));

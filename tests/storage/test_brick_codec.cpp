@@ -7,7 +7,7 @@
 
 #include "core/error.h"
 #include "storage/brick_codec.h"
-#include "storage/layout.h"
+#include "dataset/grid.h"
 
 namespace brickyard {
 namespace {
@@ -40,7 +40,7 @@ TEST(BrickCodec, RoundTripsEveryTypeCodecAndShuffle) {
     for (Codec c : {Codec::none, Codec::lz4, Codec::lz4hc})
       for (bool shuffle : {false, true})
         for (int apron : {0, 1, 2}) {
-          BrickFormat f{t, 16, apron, c, 9, shuffle};
+          BrickFormat f{{t, 16, apron}, c, 9, shuffle};
           const auto voxels = brick_for(f);
           const auto record = encode_brick(f, key, voxels, 1.0f, 2.0f);
           std::vector<std::byte> out(f.bytes());
@@ -65,7 +65,7 @@ TEST(BrickCodec, ShuffleIsInvertibleAndHelpsSixteenBitData) {
   unshuffle_bytes(shuffled.data(), back.data(), 1500, 2);
   EXPECT_EQ(back, in);
 
-  const BrickFormat with{ValueType::u16, 32, 1, Codec::lz4, 9, true};
+  const BrickFormat with{{ValueType::u16, 32, 1}, Codec::lz4, 9, true};
   BrickFormat without = with;
   without.shuffle = false;
   const auto voxels = brick_for(with);
@@ -86,7 +86,7 @@ Errc decode_error(const BrickFormat& f, const BrickKey& key, const std::vector<s
 }
 
 TEST(BrickCodec, DamagedRecordsAreCorruptErrorsNamingTheKey) {
-  const BrickFormat f{ValueType::u16, 16, 1, Codec::lz4, 9, true};
+  const BrickFormat f{{ValueType::u16, 16, 1}, Codec::lz4, 9, true};
   const BrickKey key{2, 1, 0, 3};
   const auto good = encode_brick(f, key, brick_for(f), 0, 1);
   std::string what;
@@ -124,23 +124,23 @@ TEST(BrickCodec, DamagedRecordsAreCorruptErrorsNamingTheKey) {
   EXPECT_NE(what.find("checksum mismatch"), std::string::npos) << what;
 }
 
-TEST(StoreLayout, LevelsHalveUntilOneBrickCoversTheVolume) {
-  const StoreLayout a = StoreLayout::make({256, 256, 256}, 32);
+TEST(GridLayout, LevelsHalveUntilOneBrickCoversTheVolume) {
+  const GridLayout a = GridLayout::make({256, 256, 256}, 32);
   EXPECT_EQ(a.levels, 4);
   EXPECT_EQ(a.level_dims(0), Vec3s(32));
   EXPECT_EQ(a.level_bricks(3), Vec3s(8));
   EXPECT_EQ(a.total_bricks(), 1 + 8 + 64 + 512);
-  const StoreLayout b = StoreLayout::make({100, 33, 7}, 16);
+  const GridLayout b = GridLayout::make({100, 33, 7}, 16);
   EXPECT_EQ(b.levels, 4);  // 100 -> 50 -> 25 -> 13
   EXPECT_EQ(b.level_dims(0), Vec3s(13, 5, 1));
   EXPECT_EQ(b.level_bricks(3), Vec3s(7, 3, 1));
-  EXPECT_EQ(StoreLayout::make({1, 1, 1}, 8).levels, 1);
+  EXPECT_EQ(GridLayout::make({1, 1, 1}, 8).levels, 1);
   for (int64_t i = 0; i < b.brick_count(3); ++i) EXPECT_EQ(b.linear_index(b.key_at(3, i)), i);
   EXPECT_TRUE(b.contains({3, 6, 2, 0}));
   EXPECT_FALSE(b.contains({3, 7, 0, 0}));
   EXPECT_FALSE(b.contains({4, 0, 0, 0}));
-  EXPECT_THROW(StoreLayout::make({4, 4, 4}, 24), Error);
-  EXPECT_THROW(StoreLayout::make({4, 0, 4}, 32), Error);
+  EXPECT_THROW(GridLayout::make({4, 4, 4}, 24), Error);
+  EXPECT_THROW(GridLayout::make({4, 0, 4}, 32), Error);
 }
 
 }  // namespace

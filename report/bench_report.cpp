@@ -1,4 +1,4 @@
-#include "renderers/common/bench_report.h"
+#include "report/bench_report.h"
 
 #include <algorithm>
 #include <cctype>

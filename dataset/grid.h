@@ -1,7 +1,11 @@
 #pragma once
-/// @file layout.h
-/// @brief Geometry of a multiresolution brick store: levels, their voxel and brick grids, and
-/// the node table that summarises every brick.
+/// @file grid.h
+/// @brief The typed view of a structured dataset (a grid): the geometry of its multiresolution
+/// bricks (levels, their voxel and brick grids), the shape of one brick, the node table that
+/// summarises every brick, and where bricks sit in the world.
+///
+/// This is what back ends see of a grid. It holds no store: the store that opened the dataset
+/// fills a GridView and keeps the node table it points to alive (see dataset/dataset.h).
 ///
 /// Level `levels - 1` is the finest (the source grid); each coarser level halves every
 /// dimension (rounding up) until one brick covers the whole volume at level 0. Coarse voxel i
@@ -12,18 +16,20 @@
 #include <vector>
 
 #include "core/brick_key.h"
+#include "core/camera.h"
 #include "core/error.h"
 #include "core/math.h"
+#include "core/value_type.h"
 
 namespace brickyard {
 
-struct StoreLayout {
+struct GridLayout {
   Vec3s dims{0};       ///< finest level, in voxels
   int brick_size = 32; ///< M
   int levels = 0;
 
   /// @brief The layout for a volume: as many levels as it takes for one brick to cover level 0.
-  static StoreLayout make(const Vec3s& dims, int brick_size);
+  static GridLayout make(const Vec3s& dims, int brick_size);
 
   int finest() const { return levels - 1; }
   /// @brief Halving steps from the finest level: 0 at the finest level.
@@ -67,9 +73,9 @@ static_assert(sizeof(NodeRecord) == 16, "node records are part of the on-disk fo
 class NodeTable {
  public:
   NodeTable() = default;
-  explicit NodeTable(const StoreLayout& layout);
+  explicit NodeTable(const GridLayout& layout);
 
-  const StoreLayout& layout() const { return layout_; }
+  const GridLayout& layout() const { return layout_; }
   const NodeRecord& at(const BrickKey& k) const { return levels_[k.level][size_t(layout_.linear_index(k))]; }
   NodeRecord& at(const BrickKey& k) { return levels_[k.level][size_t(layout_.linear_index(k))]; }
   const std::vector<NodeRecord>& level(int l) const { return levels_[size_t(l)]; }
@@ -77,8 +83,53 @@ class NodeTable {
   size_t bytes() const;
 
  private:
-  StoreLayout layout_;
+  GridLayout layout_;
   std::vector<std::vector<NodeRecord>> levels_;
+};
+
+/// @brief One brick as it is decoded: M^3 interior voxels of one value type with A replicated
+/// voxels on every side, (M + 2A)^3 in all, x fastest. Fixed for a whole dataset.
+struct BrickShape {
+  ValueType type = ValueType::u8;
+  int brick_size = 32;  ///< M, the interior edge in voxels
+  int apron = 1;        ///< A, replicated voxels on every side
+
+  int edge() const { return brick_size + 2 * apron; }
+  size_t voxels() const { return size_t(edge()) * size_t(edge()) * size_t(edge()); }
+  size_t bytes() const { return voxels() * size_of(type); }
+};
+
+/// @brief A grid dataset as back ends see it: levels and bricks (layout), what a decoded brick
+/// holds (shape), every node's summary (nodes), and the finest level's place in the world
+/// (voxel i of axis a sits at origin[a] + i * spacing[a]).
+///
+/// The node table is the opener's (the store's): a GridView is valid while the dataset that
+/// handed it out is open. Immutable, so any number of threads may read it.
+class GridView {
+ public:
+  GridView(const NodeTable& nodes, const BrickShape& shape, const Vec3d& origin, const Vec3d& spacing)
+      : nodes_(&nodes), shape_(shape), origin_(origin), spacing_(spacing) {}
+
+  const GridLayout& layout() const { return nodes_->layout(); }
+  const NodeTable& nodes() const { return *nodes_; }
+  const BrickShape& shape() const { return shape_; }
+  const Vec3s& dims() const { return layout().dims; }
+  const Vec3d& origin() const { return origin_; }
+  const Vec3d& spacing() const { return spacing_; }
+  /// @brief The finest level's voxel centres, first to last, in world coordinates.
+  Box3d world_box() const { return Box3d(origin_, origin_ + spacing_ * Vec3d(dims() - Vec3s(1))); }
+
+  /// @brief World-space box of a brick (its voxel centres, from origin and spacing), clamped to
+  /// the volume's last voxel.
+  Box3d brick_world_box(const BrickKey& key) const;
+  /// @brief Pixels one voxel of the brick's level covers, seen by `cam` at the nearest point of
+  /// the brick's world box: the level-of-detail measure of refinement.
+  double brick_voxel_pixels(const Camera& cam, const BrickKey& key, const Box3d& world_box, int height) const;
+
+ private:
+  const NodeTable* nodes_;
+  BrickShape shape_;
+  Vec3d origin_, spacing_;
 };
 
 }  // namespace brickyard

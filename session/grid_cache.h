@@ -1,0 +1,30 @@
+#pragma once
+/// @file grid_cache.h
+/// @brief A grid store's cache as one object, for tools, tests and benchmarks that read bricks
+/// without a renderer (`brickyard flight`, the cache's tests): the page cache over the store,
+/// and its typed brick view. Renderers get theirs from a RenderSession instead.
+///
+/// The store must outlive it; members are destroyed in reverse order (the view, then the cache).
+
+#include "cache/brick_cache.h"
+#include "cache/page_cache.h"
+#include "storage/store.h"
+
+namespace brickyard {
+
+class GridCache {
+ public:
+  /// @throws Error(unsupported) for a store without a grid; the cache's errors for its budgets.
+  GridCache(const Store& store, const CacheConfig& config) : pages_(store, config), bricks_(pages_, store.dataset().grid()) {}
+
+  PageCache& pages() { return pages_; }
+  BrickCache& bricks() { return bricks_; }
+  BrickCache* operator->() { return &bricks_; }
+  BrickCache& operator*() { return bricks_; }
+
+ private:
+  PageCache pages_;
+  BrickCache bricks_;
+};
+
+}  // namespace brickyard

@@ -1,0 +1,435 @@
+#include "storage/store.h"
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+
+#include <fmt/format.h>
+
+#include "core/error.h"
+#include "storage/page_codec.h"
+
+namespace brickyard {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr size_t kNodesPerChunk = 65536;  // 1 MiB node-table records
+const std::string kManifestKey = "manifest";
+
+std::array<std::byte, 8> node_chunk_key(uint32_t level, uint32_t chunk) {
+  std::array<std::byte, 8> k{};
+  for (int i = 0; i < 4; ++i) {
+    k[size_t(i)] = std::byte((level >> (24 - 8 * i)) & 0xff);
+    k[size_t(4 + i)] = std::byte((chunk >> (24 - 8 * i)) & 0xff);
+  }
+  return k;
+}
+
+std::array<std::byte, 8> brick_key_bytes(const BrickKey& key) {
+  const auto b = key.to_bytes();
+  std::array<std::byte, 8> out;
+  std::memcpy(out.data(), b.data(), 8);
+  return out;
+}
+
+std::array<std::byte, 8> big_endian_id(uint64_t id) {
+  std::array<std::byte, 8> out;
+  for (int i = 0; i < 8; ++i) out[size_t(i)] = std::byte((id >> (56 - 8 * i)) & 0xff);
+  return out;
+}
+
+uint64_t id_from_big_endian(lmdb::Bytes key) {
+  uint64_t id = 0;
+  for (std::byte b : key) id = (id << 8) | uint64_t(b);
+  return id;
+}
+
+bool known_database(const std::string& name) {
+  for (const char* known : {kManifestDb, kNodesDb, kBricksDb, kTetClustersDb, kTetsDb})
+    if (name == known) return true;
+  return false;
+}
+
+uint64_t elapsed_ns(std::chrono::steady_clock::time_point since) {
+  return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - since).count());
+}
+
+/// A loader thread's reader: one read snapshot, kept while it reads (the store is immutable).
+class StoreReader final : public PageReader {
+ public:
+  explicit StoreReader(const Store& store) : store_(store), txn_(store.begin_read()) {}
+  PageRead read(const PageKey& key, std::span<std::byte> out) override { return store_.read_page(txn_, key, out); }
+
+ private:
+  const Store& store_;
+  lmdb::ReadTxn txn_;
+};
+
+}  // namespace
+
+bool is_store_directory(const std::string& dir) {
+  std::error_code ec;
+  return fs::is_regular_file(fs::path(dir) / "data.mdb", ec);
+}
+
+StoreState probe_store(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::exists(dir, ec)) return StoreState::absent;
+  if (!fs::is_directory(dir, ec)) return StoreState::not_a_store;
+  if (!is_store_directory(dir)) return fs::is_empty(dir, ec) ? StoreState::absent : StoreState::not_a_store;
+  lmdb::EnvOptions options;
+  options.read_only = true;
+  std::unique_ptr<lmdb::Env> env;
+  try {
+    env = std::make_unique<lmdb::Env>(dir, options);
+  } catch (const Error&) {
+    return StoreState::not_a_store;
+  }
+  bool other = false;
+  const auto names = env->database_names(&other);
+  if (other) return StoreState::not_a_store;
+  if (names.empty()) return StoreState::incomplete;  // killed before the first commit
+  for (const auto& n : names)
+    if (!known_database(n)) return StoreState::not_a_store;
+  const auto db = env->open_database(kManifestDb, false);
+  lmdb::ReadTxn txn(*env);
+  auto text = txn.get(db, lmdb::as_bytes(kManifestKey));
+  if (!text) return StoreState::incomplete;
+  try {
+    const Manifest m = Manifest::from_json(std::string(reinterpret_cast<const char*>(text->data()), text->size()), dir);
+    return m.complete ? StoreState::complete : StoreState::incomplete;
+  } catch (const Error&) {
+    return StoreState::not_a_store;
+  }
+}
+
+void remove_store_files(const std::string& dir) {
+  for (const char* name : {"data.mdb", "lock.mdb"}) {
+    std::error_code ec;
+    fs::remove(fs::path(dir) / name, ec);
+    if (ec) throw Error(Errc::io, fmt::format("cannot remove {}: {}", name, ec.message())).with_file(dir);
+  }
+}
+
+namespace {
+std::unique_ptr<lmdb::Env> open_existing(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::exists(dir, ec)) throw Error(Errc::not_found, "no such store").with_file(dir);
+  if (!fs::is_directory(dir, ec)) throw Error(Errc::format, "not a brickyard store (not a directory)").with_file(dir);
+  if (!is_store_directory(dir)) throw Error(Errc::format, "not a brickyard store (no data.mdb)").with_file(dir);
+  lmdb::EnvOptions options;
+  options.read_only = true;
+  auto env = std::make_unique<lmdb::Env>(dir, options);
+  if (!env->has_database(kManifestDb)) throw Error(Errc::format, "not a brickyard store (no manifest)").with_file(dir);
+  return env;
+}
+
+Manifest load_manifest(lmdb::Env& env, const lmdb::Database& db, const std::string& dir) {
+  lmdb::ReadTxn txn(env);
+  auto text = txn.get(db, lmdb::as_bytes(kManifestKey));
+  if (!text) throw Error(Errc::format, "not a brickyard store (empty manifest database)").with_file(dir);
+  return Manifest::from_json(std::string(reinterpret_cast<const char*>(text->data()), text->size()), dir);
+}
+}  // namespace
+
+Manifest read_manifest(const std::string& dir) {
+  auto env = open_existing(dir);
+  const auto db = env->open_database(kManifestDb, false);
+  return load_manifest(*env, db, dir);
+}
+
+Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
+  env_ = open_existing(dir);
+  manifest_db_ = env_->open_database(kManifestDb, false);
+  manifest_ = load_manifest(*env_, manifest_db_, dir);
+  if (!manifest_.complete && !options.allow_incomplete)
+    throw Error(Errc::format, "the store is incomplete: its build was interrupted or failed; run the import again")
+        .with_file(dir);
+  DatasetInfo info;
+  info.name = dir;
+  info.kind = manifest_.kind;
+  info.min_value = manifest_.min_value;
+  info.max_value = manifest_.max_value;
+  info.time_steps = manifest_.time_steps;
+  info.source = manifest_.source;
+  if (manifest_.kind == DataKind::tetrahedral) {
+    load_cluster_table();
+    info.world = manifest_.mesh.bounds;
+    // A mesh's unit: the edge of a cube holding one tetrahedron's share of the box, a stand-in
+    // for the mean edge length that needs no pass over the tetrahedra.
+    const Vec3d e = info.world.extent();
+    const double volume = std::max(e.x, 1e-300) * std::max(e.y, 1e-300) * std::max(e.z, 1e-300);
+    info.unit_length = manifest_.mesh.tets ? std::cbrt(volume / double(manifest_.mesh.tets)) : 1.0;
+    dataset_ = std::make_unique<Dataset>(std::move(info), std::nullopt,
+                                         TetView(clusters_, size_t(manifest_.mesh.page_bytes)));
+    return;
+  }
+  load_node_table();
+  info.world = Box3d(manifest_.origin, manifest_.origin + manifest_.spacing * Vec3d(manifest_.dims - Vec3s(1)));
+  info.unit_length = min_component(manifest_.spacing);
+  dataset_ = std::make_unique<Dataset>(std::move(info),
+                                       GridView(nodes_, manifest_.format.shape(), manifest_.origin, manifest_.spacing));
+}
+
+void Store::load_node_table() {
+  const std::string& dir = path_;
+  layout_ = manifest_.layout();
+  nodes_ = NodeTable(layout_);
+  if (!env_->has_database(kNodesDb) || !env_->has_database(kBricksDb)) {
+    if (manifest_.complete) throw Error(Errc::corrupt, "complete store without node or brick database").with_file(dir);
+    return;  // an incomplete store may have neither yet
+  }
+  nodes_db_ = env_->open_database(kNodesDb, false);
+  bricks_db_ = env_->open_database(kBricksDb, false);
+  if (!manifest_.complete) return;  // the node table is written last
+
+  lmdb::ReadTxn txn(*env_);
+  for (int level = 0; level < layout_.levels; ++level) {
+    auto& records = nodes_.level(level);
+    for (size_t start = 0, chunk = 0; start < records.size(); start += kNodesPerChunk, ++chunk) {
+      const auto key = node_chunk_key(uint32_t(level), uint32_t(chunk));
+      auto value = txn.get(nodes_db_, key);
+      const size_t n = std::min(kNodesPerChunk, records.size() - start);
+      if (!value || value->size() != n * sizeof(NodeRecord))
+        throw Error(Errc::corrupt,
+                    fmt::format("node table chunk {} of level {} is {}", chunk, level,
+                                value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(NodeRecord)) : "missing"))
+            .with_file(dir);
+      std::memcpy(records.data() + start, value->data(), value->size());
+    }
+  }
+}
+
+void Store::load_cluster_table() {
+  const std::string& dir = path_;
+  if (!env_->has_database(kTetClustersDb) || !env_->has_database(kTetsDb)) {
+    if (manifest_.complete) throw Error(Errc::corrupt, "complete mesh store without cluster or tet database").with_file(dir);
+    return;
+  }
+  clusters_db_ = env_->open_database(kTetClustersDb, false);
+  tets_db_ = env_->open_database(kTetsDb, false);
+  if (!manifest_.complete) return;  // the cluster table is written last
+  clusters_.resize(size_t(manifest_.mesh.clusters));
+  lmdb::ReadTxn txn(*env_);
+  for (size_t start = 0, chunk = 0; start < clusters_.size(); start += kNodesPerChunk, ++chunk) {
+    auto value = txn.get(clusters_db_, big_endian_id(chunk));
+    const size_t n = std::min(kNodesPerChunk, clusters_.size() - start);
+    if (!value || value->size() != n * sizeof(TetCluster))
+      throw Error(Errc::corrupt, fmt::format("cluster table chunk {} is {}", chunk,
+                                             value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(TetCluster))
+                                                   : "missing"))
+          .with_file(dir);
+    std::memcpy(clusters_.data() + start, value->data(), value->size());
+  }
+  for (size_t c = 0; c < clusters_.size(); ++c)
+    if (TetClusterPage::bytes(clusters_[c].vertices, clusters_[c].tets) > manifest_.mesh.page_bytes)
+      throw Error(Errc::corrupt, fmt::format("cluster {} of {} vertices and {} tetrahedra does not fit the store's "
+                                             "{}-byte pages", c, clusters_[c].vertices, clusters_[c].tets,
+                                             manifest_.mesh.page_bytes))
+          .with_file(dir)
+          .with_field("mesh.page_bytes");
+}
+
+Store::~Store() = default;
+
+std::optional<std::span<const std::byte>> Store::record(const lmdb::ReadTxn& txn, const BrickKey& key) const {
+  return txn.get(bricks_db_, brick_key_bytes(key));
+}
+
+void Store::read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<std::byte> out) const {
+  if (!layout_.contains(key))
+    throw Error(Errc::not_found, fmt::format("brick is outside the store's {} levels", layout_.levels))
+        .with_file(path_)
+        .with_key(key.to_string());
+  BY_CHECK_EQ(out.size(), format().bytes());
+  const NodeRecord& node = nodes_.at(key);
+  if (node.is_constant()) {
+    dispatch_value_type(format().type, [&](auto tag) {
+      using T = decltype(tag);
+      std::fill_n(reinterpret_cast<T*>(out.data()), format().voxels(), static_cast<T>(node.constant));
+    });
+    return;
+  }
+  auto rec = record(txn, key);
+  if (!rec) throw Error(Errc::corrupt, "brick record is missing").with_file(path_).with_key(key.to_string());
+  try {
+    decode_brick(format(), key, *rec, out);
+  } catch (Error& e) {
+    e.with_file(path_);
+    throw;
+  }
+}
+
+void Store::read_brick(const BrickKey& key, std::span<std::byte> out) const {
+  auto txn = begin_read();
+  read_brick(txn, key, out);
+}
+
+std::vector<PageKindInfo> Store::page_kinds() const {
+  if (kind() == DataKind::tetrahedral) return {{RecordKind::tet_cluster, size_t(manifest_.mesh.page_bytes), manifest_.mesh.clusters}};
+  uint64_t stored = 0;
+  for (const LevelStats& l : manifest_.stats) stored += uint64_t(l.bricks - l.constant);
+  return {{RecordKind::brick, format().bytes(), stored}};
+}
+
+std::unique_ptr<PageReader> Store::open_reader() const { return std::make_unique<StoreReader>(*this); }
+
+std::string Store::describe(const PageKey& key) const {
+  if (key.kind == RecordKind::brick) return BrickKey::from_code(key.id).to_string();
+  if (key.kind == RecordKind::tet_cluster) return fmt::format("cluster {}", key.id);
+  return to_string(key);
+}
+
+PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const {
+  const bool brick = key.kind == RecordKind::brick && kind() == DataKind::structured;
+  const bool cluster = key.kind == RecordKind::tet_cluster && kind() == DataKind::tetrahedral;
+  if (!brick && !cluster)
+    throw Error(Errc::not_found, fmt::format("a {} store holds no {} records", to_string(kind()), to_string(key.kind)))
+        .with_file(path_)
+        .with_key(describe(key));
+  PageRead read;
+  if (brick) {
+    const BrickKey k = BrickKey::from_code(key.id);
+    if (!layout_.contains(k))
+      throw Error(Errc::not_found, fmt::format("brick is outside the store's {} levels", layout_.levels))
+          .with_file(path_)
+          .with_key(k.to_string());
+    auto rec = record(txn, k);
+    if (!rec) throw Error(Errc::corrupt, "brick record is missing").with_file(path_).with_key(k.to_string());
+    read.stored_bytes = rec->size();
+    const auto start = std::chrono::steady_clock::now();
+    try {
+      decode_brick(format(), k, *rec, out);
+    } catch (Error& e) {
+      e.with_file(path_);
+      throw;
+    }
+    read.decode_ns = elapsed_ns(start);
+    return read;
+  }
+  if (key.id >= clusters_.size())
+    throw Error(Errc::not_found, fmt::format("the mesh has {} clusters", clusters_.size())).with_file(path_).with_key(describe(key));
+  if (out.size() != manifest_.mesh.page_bytes)
+    throw Error(Errc::internal, fmt::format("a {}-byte buffer for {}-byte cluster pages", out.size(), manifest_.mesh.page_bytes));
+  auto rec = txn.get(tets_db_, big_endian_id(key.id));
+  if (!rec) throw Error(Errc::corrupt, "cluster record is missing").with_file(path_).with_key(describe(key));
+  read.stored_bytes = rec->size();
+  const auto start = std::chrono::steady_clock::now();
+  size_t used = 0;
+  try {
+    used = decode_page(key, *rec, out);
+  } catch (Error& e) {
+    e.with_file(path_);
+    throw;
+  }
+  const TetCluster& c = clusters_[key.id];
+  if (used != TetClusterPage::bytes(c.vertices, c.tets))
+    throw Error(Errc::corrupt, fmt::format("cluster page holds {} bytes, its table entry ({} vertices, {} tetrahedra) {}",
+                                           used, c.vertices, c.tets, TetClusterPage::bytes(c.vertices, c.tets)))
+        .with_file(path_)
+        .with_key(describe(key));
+  read.decode_ns = elapsed_ns(start);
+  return read;
+}
+
+void Store::for_each_page(const lmdb::ReadTxn& txn, RecordKind kind,
+                          const std::function<bool(const PageKey&, std::span<const std::byte>)>& f) const {
+  if (kind == RecordKind::brick) {
+    for_each_record(txn, [&](const BrickKey& k, std::span<const std::byte> r) { return f({RecordKind::brick, k.code()}, r); });
+    return;
+  }
+  if (kind != RecordKind::tet_cluster || this->kind() != DataKind::tetrahedral) return;
+  txn.for_each(tets_db_, [&](lmdb::Bytes key, lmdb::Bytes value) {
+    if (key.size() != 8) throw Error(Errc::corrupt, fmt::format("cluster key of {} bytes", key.size())).with_file(path_);
+    return f({RecordKind::tet_cluster, id_from_big_endian(key)}, value);
+  });
+}
+
+void Store::for_each_record(const lmdb::ReadTxn& txn,
+                                 const std::function<bool(const BrickKey&, std::span<const std::byte>)>& f) const {
+  txn.for_each(bricks_db_, [&](lmdb::Bytes key, lmdb::Bytes value) {
+    if (key.size() != 8) throw Error(Errc::corrupt, fmt::format("brick key of {} bytes", key.size())).with_file(path_);
+    return f(BrickKey::from_bytes(reinterpret_cast<const uint8_t*>(key.data())), value);
+  });
+}
+
+uint64_t Store::record_count() const {
+  auto txn = begin_read();
+  return txn.count(kind() == DataKind::tetrahedral ? tets_db_ : bricks_db_);
+}
+
+StoreWriter::StoreWriter(const std::string& dir, const Manifest& initial, const lmdb::EnvOptions& options,
+                         uint64_t batch_bytes)
+    : kind_(initial.kind) {
+  if (is_store_directory(dir)) throw Error(Errc::internal, "StoreWriter needs a directory without a store").with_file(dir);
+  env_ = std::make_unique<lmdb::Env>(dir, options);
+  manifest_db_ = env_->open_database(kManifestDb, true);
+  if (kind_ == DataKind::tetrahedral) {
+    clusters_db_ = env_->open_database(kTetClustersDb, true);
+    tets_db_ = env_->open_database(kTetsDb, true);
+  } else {
+    nodes_db_ = env_->open_database(kNodesDb, true);
+    bricks_db_ = env_->open_database(kBricksDb, true);
+  }
+  writer_ = std::make_unique<lmdb::BatchWriter>(*env_, batch_bytes);
+  Manifest m = initial;
+  m.complete = false;
+  if (kind_ == DataKind::tetrahedral) m.format_version = std::max(m.format_version, kStoreFormatVersion);
+  writer_->put(manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(m.to_json()));
+  writer_->commit();
+}
+
+StoreWriter::~StoreWriter() = default;
+
+void StoreWriter::put_brick(const BrickKey& key, std::vector<std::byte>&& record) {
+  BY_CHECK(kind_ == DataKind::structured);
+  writer_->put(bricks_db_, brick_key_bytes(key), std::move(record));
+}
+
+void StoreWriter::put_cluster(uint64_t cluster, std::span<const std::byte> page) {
+  BY_CHECK(kind_ == DataKind::tetrahedral);
+  writer_->put(tets_db_, big_endian_id(cluster), encode_page({RecordKind::tet_cluster, cluster}, page));
+}
+
+void StoreWriter::finish(const Manifest& final_manifest, const NodeTable& nodes) {
+  BY_CHECK(kind_ == DataKind::structured && final_manifest.kind == DataKind::structured);
+  writer_->commit();
+  env_->sync();  // every brick is durable before anything claims the store is complete
+  const GridLayout& layout = nodes.layout();
+  for (int level = 0; level < layout.levels; ++level) {
+    const auto& records = nodes.level(level);
+    for (size_t start = 0, chunk = 0; start < records.size(); start += kNodesPerChunk, ++chunk) {
+      const size_t n = std::min(kNodesPerChunk, records.size() - start);
+      const auto* bytes = reinterpret_cast<const std::byte*>(records.data() + start);
+      writer_->put(nodes_db_, node_chunk_key(uint32_t(level), uint32_t(chunk)),
+                   std::span<const std::byte>(bytes, n * sizeof(NodeRecord)));
+    }
+  }
+  commit_final(final_manifest);
+}
+
+void StoreWriter::finish(const Manifest& final_manifest, const std::vector<TetCluster>& clusters) {
+  BY_CHECK(kind_ == DataKind::tetrahedral && final_manifest.kind == DataKind::tetrahedral);
+  BY_CHECK_EQ(final_manifest.mesh.clusters, uint64_t(clusters.size()));
+  writer_->commit();
+  env_->sync();  // every cluster page is durable before anything claims the store is complete
+  for (size_t start = 0, chunk = 0; start < clusters.size(); start += kNodesPerChunk, ++chunk) {
+    const size_t n = std::min(kNodesPerChunk, clusters.size() - start);
+    const auto* bytes = reinterpret_cast<const std::byte*>(clusters.data() + start);
+    writer_->put(clusters_db_, big_endian_id(chunk), std::span<const std::byte>(bytes, n * sizeof(TetCluster)));
+  }
+  Manifest m = final_manifest;
+  m.format_version = std::max(m.format_version, kStoreFormatVersion);
+  commit_final(m);
+}
+
+void StoreWriter::commit_final(Manifest m) {
+  m.complete = true;
+  // One transaction: the table and the complete flag appear together or not at all.
+  const std::string text = m.to_json();
+  writer_->put(manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(text));
+  env_->set_no_sync(false);
+  writer_->commit();
+}
+
+}  // namespace brickyard

@@ -1,0 +1,150 @@
+#pragma once
+/// @file store.h
+/// @brief A dataset's store on disk: one LMDB environment per dataset directory. The database
+/// `manifest` (JSON) says what the dataset is (its kind); the others hold its records:
+/// - a grid (kind `structured`): `nodes` (the node table) and `bricks` (brick records keyed by
+///   the big-endian level-major Morton code of their BrickKey);
+/// - a tetrahedral mesh: `tet_clusters` (the cluster table) and `tets` (cluster page records
+///   keyed by the big-endian cluster index).
+///
+/// Store opens a store for reading. It loads the manifest and the whole node or cluster table
+/// at open, after which every member is const and safe to call from many threads; each thread
+/// (or task) that reads records zero-copy takes its own ReadTxn. Store is the PageSource the
+/// cache reads through, and hands out the Dataset (generic part and typed views) that back
+/// ends see; both stay valid while the Store lives. StoreWriter builds one.
+
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "dataset/dataset.h"
+#include "dataset/grid.h"
+#include "dataset/pages.h"
+#include "storage/brick_codec.h"
+#include "storage/lmdb_env.h"
+#include "storage/manifest.h"
+
+namespace brickyard {
+
+inline constexpr const char* kManifestDb = "manifest";
+inline constexpr const char* kNodesDb = "nodes";
+inline constexpr const char* kBricksDb = "bricks";
+inline constexpr const char* kTetClustersDb = "tet_clusters";
+inline constexpr const char* kTetsDb = "tets";
+
+/// @brief Whether `dir` holds an LMDB environment (data.mdb), complete or not.
+bool is_store_directory(const std::string& dir);
+enum class StoreState {
+  absent,       ///< no directory, or an empty one
+  not_a_store,  ///< something else is there: never overwrite it
+  incomplete,   ///< a store whose build did not finish (or never wrote its manifest)
+  complete,
+};
+/// @brief What is at `dir`, for deciding whether a build may (re)write it.
+StoreState probe_store(const std::string& dir);
+
+/// @brief Deletes a store's LMDB files (data.mdb, lock.mdb) and nothing else.
+void remove_store_files(const std::string& dir);
+
+class Store : public PageSource {
+ public:
+  struct OpenOptions {
+    bool allow_incomplete = false;  ///< for `info` and `verify`, which report incomplete stores
+  };
+
+  /// @throws Error(not_found) no such directory; Error(format) not a store or incomplete;
+  ///         Error(unsupported) a newer format version.
+  explicit Store(const std::string& dir, OpenOptions options);
+  explicit Store(const std::string& dir) : Store(dir, OpenOptions{}) {}
+  ~Store() override;
+  Store(const Store&) = delete;  // its Dataset points into it
+  Store& operator=(const Store&) = delete;
+
+  const std::string& path() const { return path_; }
+  const Manifest& manifest() const { return manifest_; }
+  DataKind kind() const { return manifest_.kind; }
+  /// @brief What back ends see: the generic part and the typed view of the store's kind.
+  const Dataset& dataset() const { return *dataset_; }
+  // Grid stores:
+  const GridLayout& layout() const { return layout_; }
+  const BrickFormat& format() const { return manifest_.format; }
+  const NodeTable& nodes() const { return nodes_; }
+  // Tetrahedral stores:
+  const std::vector<TetCluster>& clusters() const { return clusters_; }
+
+  // PageSource: bricks of a grid store, cluster pages of a tetrahedral one.
+  const std::string& source_name() const override { return path_; }
+  std::vector<PageKindInfo> page_kinds() const override;
+  std::unique_ptr<PageReader> open_reader() const override;
+  std::string describe(const PageKey& key) const override;
+  /// @brief Decodes any page into `out` (its kind's page size); errors as read_brick's.
+  PageRead read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const;
+
+  /// @brief A read snapshot for zero-copy record access from the calling thread.
+  lmdb::ReadTxn begin_read() const { return lmdb::ReadTxn(*env_); }
+  /// @brief The stored record of a brick (nullopt for constant nodes, which have none).
+  std::optional<std::span<const std::byte>> record(const lmdb::ReadTxn& txn, const BrickKey& key) const;
+  /// @brief Decodes a brick into `out` (format().bytes()); constant nodes are filled with their
+  /// value. Errors name the key: not_found outside the layout or for a missing record,
+  /// corrupt for a record that fails its checks.
+  void read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<std::byte> out) const;
+  void read_brick(const BrickKey& key, std::span<std::byte> out) const;
+  /// @brief Calls f(key, record) for every stored page record of a kind, in key order.
+  void for_each_page(const lmdb::ReadTxn& txn, RecordKind kind,
+                     const std::function<bool(const PageKey&, std::span<const std::byte>)>& f) const;
+  /// @brief Calls f(key, record) for every stored brick record in key order.
+  void for_each_record(const lmdb::ReadTxn& txn,
+                       const std::function<bool(const BrickKey&, std::span<const std::byte>)>& f) const;
+  /// @brief Stored records of the store's page kind (bricks, or cluster pages).
+  uint64_t record_count() const;
+
+ private:
+  void load_node_table();
+  void load_cluster_table();
+
+  std::string path_;
+  std::unique_ptr<lmdb::Env> env_;
+  lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_;
+  Manifest manifest_;
+  GridLayout layout_;
+  NodeTable nodes_;
+  std::vector<TetCluster> clusters_;
+  std::unique_ptr<Dataset> dataset_;
+};
+
+/// @brief Writes a new store of the initial manifest's kind. The constructor commits a manifest
+/// with complete = false before anything else; finish() commits the node or cluster table and
+/// the final manifest (complete = true) in the last transaction, after everything before it is
+/// on disk.
+class StoreWriter {
+ public:
+  StoreWriter(const std::string& dir, const Manifest& initial, const lmdb::EnvOptions& options,
+              uint64_t batch_bytes = uint64_t(32) << 20);
+  ~StoreWriter();
+
+  /// @brief A grid store's encoded brick record (encode_brick).
+  void put_brick(const BrickKey& key, std::vector<std::byte>&& record);
+  /// @brief A tetrahedral store's cluster page (its used bytes; encoded here).
+  void put_cluster(uint64_t cluster, std::span<const std::byte> page);
+  void finish(const Manifest& final_manifest, const NodeTable& nodes);
+  void finish(const Manifest& final_manifest, const std::vector<TetCluster>& clusters);
+
+  lmdb::Env& env() { return *env_; }
+  uint64_t bytes_written() const { return writer_->committed_bytes() + writer_->pending_bytes(); }
+
+ private:
+  void commit_final(Manifest m);
+
+  DataKind kind_;
+  std::unique_ptr<lmdb::Env> env_;
+  lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_;
+  std::unique_ptr<lmdb::BatchWriter> writer_;
+};
+
+/// @brief Reads the manifest of a store without loading anything else (allowing incomplete).
+Manifest read_manifest(const std::string& dir);
+
+}  // namespace brickyard

@@ -1,0 +1,3 @@
+#pragma once
+// A cache header that brings a store to every renderer that includes it.
+#include "storage/manifest.h"
