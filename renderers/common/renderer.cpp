@@ -1,6 +1,7 @@
 #include "renderers/common/renderer.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include <fmt/format.h>
 
@@ -26,6 +27,13 @@ BackendParams::BackendParams(const BackendInfo& info, const std::map<std::string
     }
     if (!(value >= it->lo && value <= it->hi)) {
       Error e(Errc::invalid_argument, fmt::format("{} is outside [{}, {}]", value, it->lo, it->hi));
+      e.with_field(fmt::format("backend.params.{}", name));
+      if (!file.empty()) e.with_file(file);
+      throw e;
+    }
+    if (it->integer && value != std::floor(value)) {
+      Error e(Errc::invalid_argument, fmt::format("{} is not a whole number ({} takes {})", value, name,
+                                                  it->lo == 0 && it->hi == 1 ? "0 or 1" : "a count"));
       e.with_field(fmt::format("backend.params.{}", name));
       if (!file.empty()) e.with_file(file);
       throw e;

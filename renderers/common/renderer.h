@@ -29,11 +29,13 @@
 
 namespace brickyard {
 
+/// @brief One declared parameter; ParamTable (params.h) writes them from the field each binds to.
 struct BackendParam {
   std::string name;
   double default_value = 0;
   double lo = 0, hi = 0;  ///< accepted range
   std::string doc;
+  bool integer = false;   ///< a count or a switch: fractions are refused
 };
 
 class BackendParams;

@@ -37,6 +37,7 @@
 #include "core/timing.h"
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
+#include "renderers/common/params.h"
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
@@ -70,31 +71,32 @@ constexpr uint32_t kWantsBrick = 0x40000000u;
 constexpr uint32_t kCoarseSamplerSlots = 64;
 
 struct GigaVoxelsParams {
-  double lod_ratio = 0;  // 0: the scene's quality.lod_ratio
-  double step = 0.5;     // in voxels of the level sampled
-  bool exact = false;
-  bool quadrilinear = true;
-  int slots_per_pixel = 4;
-  int subdivide_budget = 512;  // subdivisions per frame
-  int upload_budget = 512;     // bricks written into the pool per frame
-  uint32_t brick_slots = 0;    // 0: what the L1 budget holds beside the cache's staging L1
-  uint32_t node_blocks = 0;    // 0: twice the brick slots
-  int source = 0;              // 0 store, 1 Menger sponge (N = 3), 2 the store amplified
-  int menger_brick = 27;
-  int amplify_levels = 3;
-  double amplify_amplitude = 0.05, amplify_gain = 0.5;
-  int amplify_seed = 1;
-  int max_passes = 256;        // exact mode
-  int refine = 10;
-  bool skip_cells = true;      // leap the cells of a brick that hold nothing visible
-  int hidden_crossings = 5;    // iso: a step is searched for a crossing pair it may hide, down to 2^-this voxels (0: none)
-  double adaptive_step = 8;    // DVR: the most a step grows where a sample counts less (1: fixed)
-  bool face_lighting = true;   // DVR: a segment's end lightings weighted by the cell faces it crosses
-  bool middle_lighting = true; // and the cells between its first and last faces lit at their middle
-  bool sample_runs = true;     // DVR at one level: runs of samples taken side by side (sample_run)
-  bool termination_fill = true;  // DVR: a terminated ray's light left takes its last segment's colour
-  bool leap_chains = true;     // DVR at one level: leaps follow each other with no sample between (chain_leaps)
+  double lod_ratio{};          // 0: the scene's quality.lod_ratio
+  double step{};               // in voxels of the level sampled
+  bool exact{};
+  bool quadrilinear{};
+  int slots_per_pixel{};
+  int subdivide_budget{};      // subdivisions per frame
+  int upload_budget{};         // bricks written into the pool per frame
+  uint32_t brick_slots{};      // 0: what the L1 budget holds beside the cache's staging L1
+  uint32_t node_blocks{};      // 0: twice the brick slots
+  int source{};                // 0 store, 1 Menger sponge (N = 3), 2 the store amplified
+  int menger_brick{};
+  int amplify_levels{};
+  double amplify_amplitude{}, amplify_gain{};
+  int amplify_seed{};
+  int max_passes{};            // exact mode
+  int refine{};
+  bool skip_cells{};           // leap the cells of a brick that hold nothing visible
+  int hidden_crossings{};      // iso: a step is searched for a crossing pair it may hide, down to 2^-this voxels (0: none)
+  double adaptive_step{};      // DVR: the most a step grows where a sample counts less (1: fixed)
+  bool face_lighting{};        // DVR: a segment's end lightings weighted by the cell faces it crosses
+  bool middle_lighting{};      // and the cells between its first and last faces lit at their middle
+  bool sample_runs{};          // DVR at one level: runs of samples taken side by side (sample_run)
+  bool termination_fill{};     // DVR: a terminated ray's light left takes its last segment's colour
+  bool leap_chains{};          // DVR at one level: leaps follow each other with no sample between (chain_leaps)
 };
+
 
 using gigavoxels::CellPoint;
 using gigavoxels::kCellGroup;
@@ -2187,6 +2189,55 @@ class GigaVoxelsRenderer final : public Renderer {
 
 }  // namespace
 
+namespace {
+const ParamTable<GigaVoxelsParams>& gigavoxels_params() {
+  using P = GigaVoxelsParams;
+  static const ParamTable<P> table{
+      {"lod_ratio", &P::lod_ratio, 0, 0, 1000, "target pixels per voxel; 0: the scene's quality.lod_ratio"},
+      {"step", &P::step, 0.5, 1e-3, 16, "sampling step in voxels of the level sampled (times quality.step_factor; DVR: / sampling_rate)"},
+      {"exact", &P::exact, 0, 0, 1, "1: exact mode (rays stop at missing data and resume once it is loaded, until the frame is complete); "
+                         "0: approximate (coarser data meanwhile, converges over frames)"},
+      {"quadrilinear", &P::quadrilinear, 1, 0, 1, "1: blend the two mip levels around the footprint; 0: the nearest finer level only"},
+      {"slots_per_pixel", &P::slots_per_pixel, 4, 1, 16, "feedback list length per ray (shared by the rays of a 2x2 packet)"},
+      {"subdivide_budget", &P::subdivide_budget, 512, 1, 1e6, "node subdivisions per frame"},
+      {"upload_budget", &P::upload_budget, 512, 1, 1e6, "bricks written into the brick pool per frame"},
+      {"brick_slots", &P::brick_slots, 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds beside the cache's L1, which then keeps 2 x upload_budget slots to stage copies (set: the cache's L1 keeps the whole budget)"},
+      {"node_blocks", &P::node_blocks, 0, 0, 1 << 22, "node pool blocks of N^3 nodes; 0: twice the brick slots"},
+      {"source", &P::source, 0, 0, 2, "0: the store; 1: an instanced Menger sponge (N = 3) filling the volume's box; "
+                          "2: the store, amplified below its finest level by Perlin noise"},
+      {"menger_brick", &P::menger_brick, 27, 9, 81, "source=1: brick size M (9, 27 or 81)"},
+      {"amplify_levels", &P::amplify_levels, 3, 0, 10, "source=2: levels of noise detail below the finest stored level"},
+      {"amplify_amplitude", &P::amplify_amplitude, 0.05, 0, 10, "source=2: the first octave's amplitude, a fraction of the store's value range"},
+      {"amplify_gain", &P::amplify_gain, 0.5, 0, 4, "source=2: amplitude ratio between successive octaves"},
+      {"amplify_seed", &P::amplify_seed, 1, 0, 1e9, "source=2: noise seed"},
+      {"max_passes", &P::max_passes, 256, 1, 100000, "exact mode: passes per frame before the rest of the frame takes coarser data"},
+      {"refine", &P::refine, 10, 0, 40, "iso: a crossing is bisected down to 2^-refine voxels, then placed by the secant"},
+      {"skip_cells", &P::skip_cells, 1, 0, 1, "1: rays leap the 4^3-cell groups of a brick that hold nothing visible, as many at once as "
+                              "their distance to a visible group allows; 0: every step samples"},
+      {"hidden_crossings", &P::hidden_crossings, 5, 0, 20, "iso: a step is searched for a pair of crossings its two samples may hide, down to parts "
+                                     "of 2^-hidden_crossings voxels, where the brick's bounds allow one (0: none)"},
+      {"adaptive_step", &P::adaptive_step, 8, 1, 64, "DVR: the most a step grows, as T^-1/2 where T is the light left to the ray (a sample behind "
+                                  "opacity counts less); 1: a fixed step"},
+      {"face_lighting", &P::face_lighting, 1, 0, 1, "lit DVR: 1 weights a segment's two end lightings by where it crosses cell faces (where the "
+                                 "analytic gradient jumps; analytic normals only); 0: their mean"},
+      {"middle_lighting", &P::middle_lighting, 1, 0, 1, "lit DVR with face_lighting: 1 lights the cells a segment crosses between its first and "
+                                   "last cell faces with the lighting at their middle (one more gradient per such visible "
+                                   "segment); "
+                                   "0: with the mean of its ends'"},
+      {"sample_runs", &P::sample_runs, 1, 0, 1, "DVR at one level: 1 takes runs of up to 8 samples along a ray side by side (SIMD), the "
+                               "adaptive step fixed for a run (not under a point light, nor with difference normals); 0: "
+                               "one sample at a time"},
+      {"termination_fill", &P::termination_fill, 1, 0, 1, "DVR: 1 gives the light left to a ray that early termination stops (quality."
+                                    "termination_opacity) its last segment's colour, as if the medium went on alike; "
+                                    "0: the background's, as if it ended there"},
+      {"leap_chains", &P::leap_chains, 1, 0, 1, "DVR at one level: 1 leaps on, with no sample, from a leap that ends in clear cell groups "
+                               "of the same hidden value interval whose own leap reaches 2 steps (the sample would add only "
+                               "the pre-integration table's slight opacity next to a hidden range); 0: a sample at each "
+                               "leap's end"},  };
+  return table;
+}
+}  // namespace
+
 BackendEntry gigavoxels_backend() {
   BackendEntry e;
   e.info.name = "gigavoxels";
@@ -2195,49 +2246,8 @@ BackendEntry gigavoxels_backend() {
   e.info.kinds = {DataKind::structured};
   e.info.modes = {RenderMode::iso, RenderMode::dvr};
   e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
-  e.info.params = {
-      {"lod_ratio", 0, 0, 1000, "target pixels per voxel; 0: the scene's quality.lod_ratio"},
-      {"step", 0.5, 1e-3, 16, "sampling step in voxels of the level sampled (times quality.step_factor; DVR: / sampling_rate)"},
-      {"exact", 0, 0, 1, "1: exact mode (rays stop at missing data and resume once it is loaded, until the frame is complete); "
-                         "0: approximate (coarser data meanwhile, converges over frames)"},
-      {"quadrilinear", 1, 0, 1, "1: blend the two mip levels around the footprint; 0: the nearest finer level only"},
-      {"slots_per_pixel", 4, 1, 16, "feedback list length per ray (shared by the rays of a 2x2 packet)"},
-      {"subdivide_budget", 512, 1, 1e6, "node subdivisions per frame"},
-      {"upload_budget", 512, 1, 1e6, "bricks written into the brick pool per frame"},
-      {"brick_slots", 0, 0, 1 << 20, "brick pool slots; 0: as many as the scene's cache.l1 budget holds beside the cache's L1, which then keeps 2 x upload_budget slots to stage copies (set: the cache's L1 keeps the whole budget)"},
-      {"node_blocks", 0, 0, 1 << 22, "node pool blocks of N^3 nodes; 0: twice the brick slots"},
-      {"source", 0, 0, 2, "0: the store; 1: an instanced Menger sponge (N = 3) filling the volume's box; "
-                          "2: the store, amplified below its finest level by Perlin noise"},
-      {"menger_brick", 27, 9, 81, "source=1: brick size M (9, 27 or 81)"},
-      {"amplify_levels", 3, 0, 10, "source=2: levels of noise detail below the finest stored level"},
-      {"amplify_amplitude", 0.05, 0, 10, "source=2: the first octave's amplitude, a fraction of the store's value range"},
-      {"amplify_gain", 0.5, 0, 4, "source=2: amplitude ratio between successive octaves"},
-      {"amplify_seed", 1, 0, 1e9, "source=2: noise seed"},
-      {"max_passes", 256, 1, 100000, "exact mode: passes per frame before the rest of the frame takes coarser data"},
-      {"refine", 10, 0, 40, "iso: a crossing is bisected down to 2^-refine voxels, then placed by the secant"},
-      {"skip_cells", 1, 0, 1, "1: rays leap the 4^3-cell groups of a brick that hold nothing visible, as many at once as "
-                              "their distance to a visible group allows; 0: every step samples"},
-      {"hidden_crossings", 5, 0, 20, "iso: a step is searched for a pair of crossings its two samples may hide, down to parts "
-                                     "of 2^-hidden_crossings voxels, where the brick's bounds allow one (0: none)"},
-      {"adaptive_step", 8, 1, 64, "DVR: the most a step grows, as T^-1/2 where T is the light left to the ray (a sample behind "
-                                  "opacity counts less); 1: a fixed step"},
-      {"face_lighting", 1, 0, 1, "lit DVR: 1 weights a segment's two end lightings by where it crosses cell faces (where the "
-                                 "analytic gradient jumps; analytic normals only); 0: their mean"},
-      {"middle_lighting", 1, 0, 1, "lit DVR with face_lighting: 1 lights the cells a segment crosses between its first and "
-                                   "last cell faces with the lighting at their middle (one more gradient per such visible "
-                                   "segment); "
-                                   "0: with the mean of its ends'"},
-      {"sample_runs", 1, 0, 1, "DVR at one level: 1 takes runs of up to 8 samples along a ray side by side (SIMD), the "
-                               "adaptive step fixed for a run (not under a point light, nor with difference normals); 0: "
-                               "one sample at a time"},
-      {"termination_fill", 1, 0, 1, "DVR: 1 gives the light left to a ray that early termination stops (quality."
-                                    "termination_opacity) its last segment's colour, as if the medium went on alike; "
-                                    "0: the background's, as if it ended there"},
-      {"leap_chains", 1, 0, 1, "DVR at one level: 1 leaps on, with no sample, from a leap that ends in clear cell groups "
-                               "of the same hidden value interval whose own leap reaches 2 steps (the sample would add only "
-                               "the pre-integration table's slight opacity next to a hidden range); 0: a sample at each "
-                               "leap's end"},
-  };
+  e.info.params = gigavoxels_params().declarations();
+
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
   // The loader has at most half the staging slots' worth of bricks asked for at a time
@@ -2250,32 +2260,7 @@ BackendEntry gigavoxels_backend() {
     return uint32_t(2 * p["upload_budget"]) + (p["source"] == 2 ? kCoarseSamplerSlots : 0);
   };
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
-    GigaVoxelsParams gp;
-    gp.lod_ratio = p["lod_ratio"];
-    gp.step = p["step"];
-    gp.exact = p["exact"] != 0;
-    gp.quadrilinear = p["quadrilinear"] != 0;
-    gp.slots_per_pixel = int(p["slots_per_pixel"]);
-    gp.subdivide_budget = int(p["subdivide_budget"]);
-    gp.upload_budget = int(p["upload_budget"]);
-    gp.brick_slots = uint32_t(p["brick_slots"]);
-    gp.node_blocks = uint32_t(p["node_blocks"]);
-    gp.source = int(p["source"]);
-    gp.menger_brick = int(p["menger_brick"]);
-    gp.amplify_levels = int(p["amplify_levels"]);
-    gp.amplify_amplitude = p["amplify_amplitude"];
-    gp.amplify_gain = p["amplify_gain"];
-    gp.amplify_seed = int(p["amplify_seed"]);
-    gp.max_passes = int(p["max_passes"]);
-    gp.refine = int(p["refine"]);
-    gp.skip_cells = p["skip_cells"] != 0;
-    gp.hidden_crossings = int(p["hidden_crossings"]);
-    gp.adaptive_step = p["adaptive_step"];
-    gp.face_lighting = p["face_lighting"] != 0;
-    gp.middle_lighting = p["middle_lighting"] != 0;
-    gp.sample_runs = p["sample_runs"] != 0;
-    gp.termination_fill = p["termination_fill"] != 0;
-    gp.leap_chains = p["leap_chains"] != 0;
+    const GigaVoxelsParams gp = gigavoxels_params().bind(p);
     return dispatch_value_type(ctx.bricks().shape().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       using Stored = decltype(stored);
       std::unique_ptr<Source> source;

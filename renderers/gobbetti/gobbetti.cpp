@@ -30,6 +30,7 @@
 #include "core/timing.h"
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
+#include "renderers/common/params.h"
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
@@ -43,14 +44,30 @@ constexpr uint32_t kEmptyLeaf = 0xffffffffu;   // nothing to sample
 constexpr uint32_t kConstantLeaf = 0x80000000u; // | index into the frame's constants
 
 struct GobbettiParams {
-  double lod_ratio = 0;       // 0: the scene's quality.lod_ratio
-  double step = 0.5;          // in voxels of the leaf's level
-  int upload_budget = 256;    // new brick requests per frame
-  bool visibility = true;
-  int visibility_pixels = 4;
-  int visibility_groups = 4;  // screen-tile groups: every node is queried within this many frames
-  int refine = 6;             // bisection steps refining an isosurface crossing
+  double lod_ratio{};     // 0: the scene's quality.lod_ratio
+  double step{};          // in voxels of the leaf's level
+  int upload_budget{};    // new brick requests per frame
+  bool visibility{};
+  int visibility_pixels{};
+  int visibility_groups{};  // screen-tile groups: every node is queried within this many frames
+  int refine{};           // bisection steps refining an isosurface crossing
 };
+
+const ParamTable<GobbettiParams>& gobbetti_params() {
+  using P = GobbettiParams;
+  static const ParamTable<P> table{
+      {"lod_ratio", &P::lod_ratio, 0, 0, 1000, "target pixels per voxel; 0: the scene's quality.lod_ratio"},
+      {"step", &P::step, 0.5, 1e-3, 16,
+       "sampling step in voxels of each leaf's level (times quality.step_factor; DVR: / sampling_rate)"},
+      {"upload_budget", &P::upload_budget, 256, 1, 1e6, "new brick requests per frame"},
+      {"visibility", &P::visibility, 1, 0, 1, "1: visibility feedback (occluded nodes are not refined)"},
+      {"visibility_pixels", &P::visibility_pixels, 4, 1, 1e6, "pixels in front of the depth buffer that make a node visible"},
+      {"visibility_groups", &P::visibility_groups, 4, 1, 64,
+       "screen-tile groups: each frame queries one, all nodes within this many frames"},
+      {"refine", &P::refine, 6, 0, 40, "bisection steps refining an isosurface crossing"},
+  };
+  return table;
+}
 
 template <typename Stored>
 class GobbettiRenderer final : public Renderer {
@@ -648,26 +665,11 @@ BackendEntry gobbetti_backend() {
                        "index with neighbour links, stackless traversal, visibility feedback";
   e.info.kinds = {DataKind::structured};
   e.info.modes = {RenderMode::iso, RenderMode::dvr};
-  e.info.params = {
-      {"lod_ratio", 0, 0, 1000, "target pixels per voxel; 0: the scene's quality.lod_ratio"},
-      {"step", 0.5, 1e-3, 16, "sampling step in voxels of each leaf's level (times quality.step_factor; DVR: / sampling_rate)"},
-      {"upload_budget", 256, 1, 1e6, "new brick requests per frame"},
-      {"visibility", 1, 0, 1, "1: visibility feedback (occluded nodes are not refined)"},
-      {"visibility_pixels", 4, 1, 1e6, "pixels in front of the depth buffer that make a node visible"},
-      {"visibility_groups", 4, 1, 64, "screen-tile groups: each frame queries one, all nodes within this many frames"},
-      {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing"},
-  };
+  e.info.params = gobbetti_params().declarations();
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
-    GobbettiParams gp;
-    gp.lod_ratio = p["lod_ratio"];
-    gp.step = p["step"];
-    gp.upload_budget = int(p["upload_budget"]);
-    gp.visibility = p["visibility"] != 0;
-    gp.visibility_pixels = int(p["visibility_pixels"]);
-    gp.visibility_groups = int(p["visibility_groups"]);
-    gp.refine = int(p["refine"]);
+    const GobbettiParams gp = gobbetti_params().bind(p);
     return dispatch_value_type(ctx.bricks().shape().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       return std::make_unique<GobbettiRenderer<decltype(stored)>>(ctx, gp);
     });

@@ -13,6 +13,7 @@
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
 #include "renderers/common/grid_walk.h"
+#include "renderers/common/params.h"
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
@@ -21,9 +22,18 @@ namespace brickyard {
 namespace {
 
 struct RaymarchParams {
-  double step = 0.5;         // voxels, before the scene's step_factor and sampling_rate
-  int refine = 6;            // bisection steps refining an isosurface crossing
+  double step{};  // voxels, before the scene's step_factor and sampling_rate
+  int refine{};   // bisection steps refining an isosurface crossing
 };
+
+const ParamTable<RaymarchParams>& raymarch_params() {
+  static const ParamTable<RaymarchParams> table{
+      {"step", &RaymarchParams::step, 0.5, 1e-3, 16.0,
+       "sampling step in voxels (times the scene's quality.step_factor; DVR/MIP: divided by sampling_rate)"},
+      {"refine", &RaymarchParams::refine, 6, 0, 40, "bisection steps refining an isosurface crossing between two samples"},
+  };
+  return table;
+}
 
 template <typename Stored>
 class RaymarchRenderer final : public Renderer {
@@ -261,16 +271,11 @@ BackendEntry raymarch_backend() {
   e.info.modes = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
   e.info.shadows = true;
   e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
-  e.info.params = {
-      {"step", 0.5, 1e-3, 16.0, "sampling step in voxels (times the scene's quality.step_factor; DVR/MIP: divided by sampling_rate)"},
-      {"refine", 6, 0, 40, "bisection steps refining an isosurface crossing between two samples"},
-  };
+  e.info.params = raymarch_params().declarations();
   e.info.quality_param = "step";
   e.info.quality_sweep = {2.0, 1.0, 0.5, 0.25, 0.125};
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
-    RaymarchParams rp;
-    rp.step = p["step"];
-    rp.refine = int(p["refine"]);
+    const RaymarchParams rp = raymarch_params().bind(p);
     return dispatch_value_type(ctx.bricks().shape().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       return std::make_unique<RaymarchRenderer<decltype(stored)>>(ctx, rp);
     });

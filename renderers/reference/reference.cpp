@@ -26,6 +26,7 @@
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
 #include "renderers/common/grid_walk.h"
+#include "renderers/common/params.h"
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
@@ -75,9 +76,19 @@ class AnalyticTruth {
 };
 
 struct ReferenceParams {
-  double step = 0.125;  // voxels, for DVR (and the analytic iso/MIP search)
-  bool analytic = false;
+  double step{};  // voxels, for DVR (and the analytic iso/MIP search)
+  bool analytic{};
 };
+
+const ParamTable<ReferenceParams>& reference_params() {
+  static const ParamTable<ReferenceParams> table{
+      {"step", &ReferenceParams::step, 0.125, 1e-3, 1.0,
+       "DVR sampling step in voxels (divided by the scene's sampling_rate); analytic mode's search step"},
+      {"analytic", &ReferenceParams::analytic, 0, 0, 1,
+       "1: render the procedural field the store was made from instead of its voxels"},
+  };
+  return table;
+}
 
 template <typename Stored>
 class ReferenceRenderer final : public Renderer {
@@ -371,14 +382,9 @@ BackendEntry reference_backend() {
   e.info.modes = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
   e.info.shadows = true;
   e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
-  e.info.params = {
-      {"step", 0.125, 1e-3, 1.0, "DVR sampling step in voxels (divided by the scene's sampling_rate); analytic mode's search step"},
-      {"analytic", 0, 0, 1, "1: render the procedural field the store was made from instead of its voxels"},
-  };
+  e.info.params = reference_params().declarations();
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
-    ReferenceParams rp;
-    rp.step = p["step"];
-    rp.analytic = p["analytic"] != 0;
+    const ReferenceParams rp = reference_params().bind(p);
     std::unique_ptr<AnalyticTruth> truth;
     if (rp.analytic) {
       truth = AnalyticTruth::from_source(ctx.dataset().source, ctx.grid().shape().type);
