@@ -127,6 +127,10 @@ void RenderSession::reset_cache() { build_cache(); }
 bool RenderSession::converged() const { return renderer_->converged(); }
 
 int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames, Settle how) {
+  return settle(setup(frame, outputs), max_frames, how);
+}
+
+int RenderSession::settle(const FrameSetup& frame_setup, int max_frames, Settle how) {
   struct CompleteFrames {  // off again however settle() ends
     Renderer& renderer;
     explicit CompleteFrames(Renderer& r, bool on) : renderer(r) { renderer.set_complete_frames(on); }
@@ -135,7 +139,7 @@ int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames
   FrameBuffers scratch;
   bool completing = how == Settle::complete;
   for (int n = 1; n <= max_frames; ++n) {
-    render(frame, scratch, outputs);
+    render(frame_setup, scratch);
     pages_->wait_idle();  // the loader serves this frame's requests before the next one
     if (!renderer_->converged()) continue;
     if (!completing) return n;
@@ -151,14 +155,22 @@ Camera RenderSession::camera(int frame) const {
   return scene_.camera.at(std::clamp(frame, 0, scene_.frames() - 1)).in_box(context_->geometry().world);
 }
 
-FrameStats RenderSession::render(int frame, FrameBuffers& out, const FrameOutputs& outputs) {
+FrameSetup RenderSession::setup(int frame, const FrameOutputs& outputs) const {
   FrameSetup setup;
   setup.camera = camera(frame);
   setup.width = scene_.width;
   setup.height = scene_.height;
   setup.frame = frame;
   setup.outputs = outputs;
-  return render_frame(*renderer_, *context_, setup, out);
+  return setup;
+}
+
+FrameStats RenderSession::render(int frame, FrameBuffers& out, const FrameOutputs& outputs) {
+  return render(setup(frame, outputs), out);
+}
+
+FrameStats RenderSession::render(const FrameSetup& frame_setup, FrameBuffers& out) {
+  return render_frame(*renderer_, *context_, frame_setup, out);
 }
 
 }  // namespace brickyard

@@ -55,7 +55,12 @@ class RenderSession {
 
   /// @brief The camera of frame f, in world coordinates.
   Camera camera(int frame) const;
+  /// @brief What render(frame) renders: the scene's camera for the frame, its image size.
+  FrameSetup setup(int frame, const FrameOutputs& outputs = {}) const;
   FrameStats render(int frame, FrameBuffers& out, const FrameOutputs& outputs = {});
+  /// @brief Renders a frame set up by the caller (a camera in world coordinates that the
+  /// scene's normalised cameras cannot place: tests, tools).
+  FrameStats render(const FrameSetup& setup, FrameBuffers& out);
   /// @brief Drops every cached page (a new cache and back end): the next frame is cold.
   void reset_cache();
   /// @brief Whether the back end's last frame was complete (see Renderer::converged()).
@@ -73,6 +78,7 @@ class RenderSession {
   /// they would be shown until one of those converges too (usually the next): the count is
   /// then not the frames a viewer would see converge.
   int settle(int frame, const FrameOutputs& outputs, int max_frames = kMaxSettleFrames, Settle how = Settle::refine);
+  int settle(const FrameSetup& setup, int max_frames = kMaxSettleFrames, Settle how = Settle::refine);
 
  private:
   void build_cache();

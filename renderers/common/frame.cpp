@@ -75,6 +75,7 @@ std::string FrameStats::to_json() const {
   j["width"] = width;
   j["height"] = height;
   j["threads"] = threads;
+  j["tile_threads"] = tile_threads;
   j["seconds"] = seconds;
   nlohmann::ordered_json ph = nlohmann::ordered_json::object();
   for (const auto& p : phases) ph[p.name] = p.seconds;

@@ -71,7 +71,8 @@ struct PhaseTime {
 struct FrameStats {
   int frame = 0;
   int width = 0, height = 0;
-  int threads = 0;
+  int threads = 0;                 ///< threads the frame's arena allows
+  int tile_threads = 0;            ///< distinct threads that rendered its tiles
   double seconds = 0;              ///< the whole frame, wall clock
   std::vector<PhaseTime> phases;   ///< e.g. prepare, render, finish
   RayCounters counters;

@@ -1,6 +1,7 @@
 #include "renderers/common/render.h"
 
 #include <algorithm>
+#include <thread>
 #include <vector>
 
 #include <fmt/format.h>
@@ -29,6 +30,7 @@ FrameStats render_frame(Renderer& renderer, const RenderContext& context, const 
 
   const int tiles_x = (setup.width + kTileSize - 1) / kTileSize, tiles_y = (setup.height + kTileSize - 1) / kTileSize;
   std::vector<RayCounters> tile_counters(size_t(tiles_x) * size_t(tiles_y));
+  std::vector<std::thread::id> tile_thread(tile_counters.size());
   double render_seconds = 0, finish_seconds = 0;
   do {
     watch = Stopwatch();
@@ -38,6 +40,7 @@ FrameStats render_frame(Renderer& renderer, const RenderContext& context, const 
         const Tile tile{tx * kTileSize, ty * kTileSize, std::min(setup.width, (tx + 1) * kTileSize),
                         std::min(setup.height, (ty + 1) * kTileSize)};
         renderer.render_tile(setup, tile, out, tile_counters[size_t(t)]);
+        tile_thread[size_t(t)] = std::this_thread::get_id();
       }
     });
     render_seconds += watch.seconds();
@@ -46,6 +49,8 @@ FrameStats render_frame(Renderer& renderer, const RenderContext& context, const 
     finish_seconds += watch.seconds();
   } while (renderer.another_pass());
   for (const RayCounters& c : tile_counters) stats.counters += c;
+  std::sort(tile_thread.begin(), tile_thread.end());
+  stats.tile_threads = int(std::unique(tile_thread.begin(), tile_thread.end()) - tile_thread.begin());
   stats.add_phase("render", render_seconds);
 
   watch = Stopwatch();

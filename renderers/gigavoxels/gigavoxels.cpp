@@ -1367,8 +1367,10 @@ class GigaVoxelsRenderer final : public Renderer {
           }
           ++counters.samples;
           const float v = sample(bl, t, nullptr);
-          if (s.have_prev && crossing(s.prev_value, v)) {
-            hit_t = refine_hit(lv, lam, s.prev_t, t, s.prev_value, v);
+          // A crossing since the last sample, or, with none before (the ray's first sample in
+          // data it can see), a sample on the surface: the ray starts on it.
+          if (s.have_prev ? crossing(s.prev_value, v) : crossing(v, v)) {
+            hit_t = s.have_prev ? refine_hit(lv, lam, s.prev_t, t, s.prev_value, v) : refine_hit(lv, lam, t, t, v, v);
             finished = true;
             break;
           }

@@ -28,8 +28,9 @@ class PreintegratedTf {
     // Entries at the points' own values, in double (rounded to float, the first entry would
     // move off a zero-opacity point). Points that all share one value make a step there: the
     // table spans a sliver above it, so that values above take the last point.
-    lo_ = pts.front().value;
-    double hi = pts.back().value;
+    // No points: transparent everywhere (every entry's opacity is 0).
+    lo_ = pts.empty() ? 0.0 : pts.front().value;
+    double hi = pts.empty() ? 1.0 : pts.back().value;
     if (!(hi > lo_)) hi = lo_ + std::max(std::abs(lo_), 1.0) * 1e-9;
     const int n = std::max(size, 2);
     scale_ = double(n - 1) / (hi - lo_);

@@ -529,7 +529,9 @@ class GobbettiRenderer final : public Renderer {
           const double v = b.sample(t);
           for (size_t s = 0; s < surfaces.size(); ++s) {
             const double g = v - surfaces[s].value;
-            if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
+            if (!have_prev && g == 0) {  // the ray starts on the surface (or re-enters data on it)
+              if (t < hit_t) hit_t = t, hit_s = int(s), hit_brick = b;
+            } else if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
               const double iso = surfaces[s].value;
               const double th = bisect_crossing(
                   [&](double m) {
@@ -570,7 +572,11 @@ class GobbettiRenderer final : public Renderer {
       const bool lit = r.shading_.lit();
       Vec3d accum(0.0);
       double a_acc = 0;
-      double t_next = ray.span.t0;
+      // The ray is integrated up to `covered`: each sample stands for the step after it and is
+      // taken at that step's middle (the midpoint rule, second order in the step, as raymarch's
+      // and the reference's samples), in the leaf that holds it; a ray's last step is cut where
+      // it leaves the volume and sampled at its own middle.
+      double covered = ray.span.t0;
       auto composite = [&](Vec3f c, double a, double t, const Vec3d& gradient) {
         Vec3d n(0.0);
         if (gradients) n = shade_normal(gradient, ray.world.dir);
@@ -588,17 +594,19 @@ class GobbettiRenderer final : public Renderer {
       r.index_.traverse(ray.org, ray.dir, ray.span.t0, ray.span.t1, [&](const gobbetti::LeafVisit& leaf) {
         ++counters.nodes;
         if (leaf.outside || leaf.payload == kEmptyLeaf) {
-          t_next = std::max(t_next, leaf.tb);
+          covered = std::max(covered, leaf.tb);
           return true;
         }
         if (leaf.payload & kConstantLeaf) {
-          // A constant region: its emission-absorption integral in closed form.
+          // A constant region: its emission-absorption integral in closed form, from where the
+          // last sample's step ended.
           Vec3f c;
           float a;
           r.scene_.transfer_function.eval(r.constants_[leaf.payload & ~kConstantLeaf], c, a);
-          const double length_voxels = (leaf.tb - std::max(leaf.ta, t_next)) * speed;
-          if (a > 0 && length_voxels > 0) composite(c, 1 - std::pow(1 - double(a), length_voxels), std::max(leaf.ta, t_next), Vec3d(0.0));
-          t_next = std::max(t_next, leaf.tb);
+          const double from = std::max(leaf.ta, covered);
+          const double length_voxels = (leaf.tb - from) * speed;
+          if (a > 0 && length_voxels > 0) composite(c, 1 - std::pow(1 - double(a), length_voxels), from, Vec3d(0.0));
+          covered = std::max(covered, leaf.tb);
           if (a_acc >= stop) occlusion = leaf.tb;
           return a_acc < stop;
         }
@@ -606,21 +614,28 @@ class GobbettiRenderer final : public Renderer {
         const Brick b = brick_of(leaf, ray);
         const TfTable& tf = r.tf_by_level_[size_t(b.level)];
         const double dt = r.step_by_level_[size_t(b.level)] / speed;
-        double t = std::max(t_next, leaf.ta);
-        for (; t <= leaf.tb; t += dt) {
+        covered = std::max(covered, leaf.ta);
+        while (covered < leaf.tb) {
+          double t = covered + 0.5 * dt;
+          const double part = std::min(dt, ray.span.t1 - covered);
+          if (t >= leaf.tb) {
+            if (part >= dt) break;  // the step's middle lies in the next leaf: sampled there
+            t = covered + 0.5 * part;  // the ray's last, cut step
+          }
           ++counters.samples;
           Vec3d g(0.0);
           const double v = b.sample(t, gradients ? &g : nullptr);
           Vec3f c;
           float a;
           tf.lookup(float(v), c, a);
+          if (a > 0 && part < dt) a = float(1 - std::pow(1 - double(a), part / dt));
           if (a > 0) composite(c, a, t, g);
+          covered += dt;
           if (a_acc >= stop) {
             occlusion = t;
             return false;
           }
         }
-        t_next = t;
         return true;
       });
       px.color = Vec3f(accum + Vec3d(r.scene_.background) * (1 - a_acc));

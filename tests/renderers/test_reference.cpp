@@ -11,7 +11,6 @@
 
 #include <gtest/gtest.h>
 
-#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
@@ -796,53 +795,6 @@ TEST_F(SphereReference, GridAndAnalyticImagesAgree) {
 
 // --- thread-count independence ---------------------------------------------------------
 
-bool same_bits(const FrameBuffers& a, const FrameBuffers& b) {
-  auto eq = [](const auto& x, const auto& y) {
-    return x.width() == y.width() && x.height() == y.height() &&
-           std::memcmp(x.data(), y.data(), sizeof(*x.data()) * size_t(x.width()) * size_t(x.height())) == 0;
-  };
-  return eq(a.color, b.color) && eq(a.depth, b.depth) && eq(a.normal, b.normal);
-}
-
-TEST(RenderThreads, FramesAreBitIdenticalWithOneAndTwoThreads) {
-  testing::TempDir dir;
-  BuildOptions o;
-  o.brick_size = 8;
-  auto src = make_field_source(make_field("fbm"), {40, 36, 33}, ValueType::f32);
-  const Manifest m = build_store(*src, dir.file("fbm"), o).manifest;
-  const double lo = m.min_value, hi = m.max_value;
-  Camera cam;
-  cam.eye = Vec3d(1.6, -0.9, 1.3);
-  cam.target = Vec3d(0.5, 0.5, 0.45);
-  cam.fov_degrees = 35;
-  for (const char* backend : {"reference", "raymarch"})
-    for (RenderMode mode : {RenderMode::iso, RenderMode::dvr, RenderMode::mip}) {
-      Scene s = sphere_scene(dir.file("fbm"), backend, cam, 48);
-      s.mode = mode;
-      auto at = [lo, hi](double f) { return lo + f * (hi - lo); };
-      s.isosurfaces = {Isosurface{at(0.5), Vec3f(0.9f, 0.6f, 0.3f)}, Isosurface{at(0.65), Vec3f(0.3f, 0.6f, 0.9f)}};
-      s.transfer_function = TransferFunction({{at(0.3), Vec3f(0.1f, 0.2f, 0.9f), 0.0f},
-                                              {at(0.55), Vec3f(0.9f, 0.5f, 0.1f), 0.3f},
-                                              {at(0.8), Vec3f(1.0f, 1.0f, 0.9f), 0.9f}});
-      s.shading.shadows = mode == RenderMode::iso;
-      FrameBuffers frames[2];
-      RayCounters counters[2];
-      for (int threads : {1, 2}) {
-        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
-        RenderSession session(s);
-        counters[threads - 1] = session.render(0, frames[threads - 1], FrameOutputs{.depth = true, .normals = true}).counters;
-      }
-      SCOPED_TRACE(::testing::Message() << backend << " " << to_string(mode));
-      EXPECT_TRUE(same_bits(frames[0], frames[1]));
-      EXPECT_EQ(counters[0].rays, counters[1].rays);
-      EXPECT_EQ(counters[0].samples, counters[1].samples);
-      EXPECT_EQ(counters[0].cells, counters[1].cells);
-      // Not vacuous: something was drawn.
-      int drawn = 0;
-      for (int i = 0; i < 48 * 48; ++i) drawn += frames[0].color.data()[i].a > 0;
-      EXPECT_GT(drawn, 100);
-    }
-}
 
 TEST(ShadingModel, LightingIsAveragedBeforeItIsApplied) {
   // apply() is affine in the lighting, so the mean of two points'
