@@ -434,20 +434,6 @@ TEST_F(BrickCacheTest, BudgetsSmallerThanOneBrickAreConfigurationErrors) {
   EXPECT_THROW(PageCache(*store_, c), Error);
 }
 
-TEST_F(BrickCacheTest, ShutdownWithRequestsInFlightIsClean) {
-  const auto keys = finest_keys(*store_);
-  for (int round = 0; round < 5; ++round) {
-    CacheConfig c = small_config(32, 32, store_->format().bytes());
-    c.upload_bricks_per_frame = 3;
-    GridCache cache_pages(*store_, c);
-    BrickCache& cache = cache_pages.bricks();
-    cache.frame_begin();
-    for (const auto& k : keys) cache.request(k, 1);
-    cache.frame_end();
-    // Destroyed with most requests queued, some decoding, some waiting for budget.
-  }
-}
-
 TEST_F(BrickCacheTest, RecordsATraceOfEveryAccess) {
   testing::TempDir dir;
   const auto keys = finest_keys(*store_);
