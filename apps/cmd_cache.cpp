@@ -242,7 +242,7 @@ void run_flight(const FlightCliOptions& o) {
   c.l2_bytes = parse_bytes(o.l2, "--l2");
   c.l1_policy = o.l1_policy;
   c.l2_policy = o.l2_policy;
-  c.upload_bricks_per_frame = o.upload_budget;
+  c.upload_pages_per_frame = o.upload_budget;
   c.loader_threads = o.loaders;
   c.trace_path = o.trace;
   const CameraPath path = CameraPath::load(o.path);

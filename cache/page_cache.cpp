@@ -377,7 +377,7 @@ PageBuffer PageCache::load_from_source(PageReader& reader, Kind& k, const PageKe
 
 void PageCache::drain_ready() {
   Impl& m = *impl_;
-  const uint64_t page_limit = config_.upload_bricks_per_frame, byte_limit = config_.upload_bytes_per_frame;
+  const uint64_t page_limit = config_.upload_pages_per_frame, byte_limit = config_.upload_bytes_per_frame;
   while (true) {
     Impl::Ready r;
     uint64_t claimed_in = 0;  // the frame whose budget this page claimed

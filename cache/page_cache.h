@@ -53,7 +53,7 @@ struct CacheConfig {
   std::string l1_policy = "lru";
   std::string l2_policy = "lru";
   int loader_threads = 2;
-  uint32_t upload_bricks_per_frame = 0;  ///< pages of any kind uploaded per frame; 0: unlimited
+  uint32_t upload_pages_per_frame = 0;  ///< pages (of every kind together) uploaded per frame; 0: unlimited
   uint64_t upload_bytes_per_frame = 0;   ///< 0: unlimited
   std::string trace_path;                ///< record every access to this file (brickyard format)
   /// The part of the L1 budget that a back end's own brick pool holds beside this cache's L1

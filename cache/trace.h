@@ -35,7 +35,7 @@ std::string_view to_string(AccessKind k);
 struct TraceRecord {
   uint64_t key = 0;      ///< BrickKey::code() for brickyard traces, any id otherwise
   uint32_t frame = 0;
-  uint32_t size = 1;     ///< bytes (stored record size for brick traces)
+  uint32_t size = 1;     ///< bytes (the decoded page size, in traces the cache records)
   AccessKind kind = AccessKind::demand;
   uint8_t hit_level = 0; ///< where the live cache found it: 1 L1, 2 L2, 3 store; 0 unknown
   uint32_t thread = 0;

@@ -132,6 +132,10 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
   m.source = r.at("source").dump();
   m.build = r.at("build").dump();
   if (m.kind == DataKind::tetrahedral) {
+    if (m.format_version < 2)
+      throw Error(Errc::format, fmt::format("a tetrahedral store needs format version 2 or later, not {}", m.format_version))
+          .with_file(path)
+          .with_field("format_version");
     const json& mesh = r.at("mesh");
     if (!mesh.is_object()) throw Error(Errc::format, "not an object").with_file(path).with_field("mesh");
     Reader rm{mesh, path};

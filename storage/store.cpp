@@ -294,6 +294,10 @@ PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::spa
       throw Error(Errc::not_found, fmt::format("brick is outside the store's {} levels", layout_.levels))
           .with_file(path_)
           .with_key(k.to_string());
+    if (nodes_.at(k).is_constant()) {  // no record: the node's value, as read_brick gives it
+      read_brick(txn, k, out);
+      return read;
+    }
     auto rec = record(txn, k);
     if (!rec) throw Error(Errc::corrupt, "brick record is missing").with_file(path_).with_key(k.to_string());
     read.stored_bytes = rec->size();

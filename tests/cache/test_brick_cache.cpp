@@ -150,6 +150,26 @@ TEST_F(BrickCacheTest, ConstantNodesNeedNoSlot) {
   EXPECT_EQ(cache.stats().constant_hits, uint64_t(constants));
 }
 
+TEST_F(BrickCacheTest, AConstantBrickAskedOfThePageCacheIsItsValueNotAnError) {
+  // The typed view answers constant nodes itself; a caller of the page cache below it (a tool
+  // that knows only pages) gets the brick filled with the node's value, as read_brick gives it.
+  Store blobs(dir_->file("blobs"));
+  GridCache cache(blobs, small_config(4, 8, blobs.format().bytes()));
+  const GridLayout& l = blobs.layout();
+  for (int64_t i = 0; i < l.brick_count(l.finest()); ++i) {
+    const BrickKey k = l.key_at(l.finest(), i);
+    const NodeRecord& n = blobs.nodes().at(k);
+    if (!n.is_constant()) continue;
+    const PageHandle h = cache.pages().fetch(BrickCache::page_key(k));
+    ASSERT_TRUE(h.resident());
+    for (size_t v = 0; v < blobs.format().voxels(); ++v) ASSERT_EQ(float(uint8_t(h.bytes()[v])), n.constant) << v;
+    EXPECT_EQ(cache.pages().stats().l3_bytes_read, 0u);  // no record was read
+    EXPECT_EQ(cache.pages().stats().failed_keys, 0u);
+    return;
+  }
+  FAIL() << "no constant brick";
+}
+
 TEST(BrickCacheConstants, NearConstantBricksCarryTheirStoredValue) {
   // With a tolerance, a constant node's value is the middle of its range, not its minimum.
   testing::TempDir dir;
@@ -194,7 +214,7 @@ TEST_F(BrickCacheTest, PinnedSlotsAreNeverEvicted) {
 
 TEST_F(BrickCacheTest, UploadsRespectThePerFrameBudget) {
   CacheConfig c = small_config(64, 64, store_->format().bytes());
-  c.upload_bricks_per_frame = 5;
+  c.upload_pages_per_frame = 5;
   GridCache cache_pages(*store_, c);
   BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);
@@ -215,7 +235,7 @@ TEST_F(BrickCacheTest, ABrickLoadedAndWaitingForTheUploadBudgetIsNotRequestedAga
   // decoded and waits for a later frame's upload budget is on its way: asking for it again
   // must not queue a second load (from L2), which would be read and dropped.
   CacheConfig c = small_config(64, 64, store_->format().bytes());
-  c.upload_bricks_per_frame = 4;
+  c.upload_pages_per_frame = 4;
   GridCache cache_pages(*store_, c);
   BrickCache& cache = cache_pages.bricks();
   const auto keys = finest_keys(*store_);

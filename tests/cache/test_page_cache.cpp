@@ -221,7 +221,7 @@ TEST(PageCache, ShutdownWithRequestsInFlightIsClean) {
       c.l1_slots = 32;
       c.l2_bytes = 64 * 32;
       c.loader_threads = 3;
-      c.upload_bricks_per_frame = 3;
+      c.upload_pages_per_frame = 3;
       c.trace_path = trace;
       PageCache cache(source, c);
       cache.frame_begin();

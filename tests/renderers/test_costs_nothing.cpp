@@ -18,6 +18,7 @@
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
 #include "session/render_session.h"
+#include "render_test_util.h"
 #include "shared_suite.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/scene.h"
@@ -160,7 +161,7 @@ TEST_F(CostsNothing, NoShadowRayWithoutALightEvenWhenShadowsAreAsked) {
     // A back end that casts no shadow rays is refused a scene that asks for them (the rest
     // applies to it: no light, or no shadows asked, costs none).
     if (!testing::shades_as_asked(backend, lit_scene.shading)) {
-      EXPECT_THROW(RenderSession(lit_scene, RenderSession::Options{.backend = backend}), Error);
+      EXPECT_THROW(RenderSession(lit_scene, testing::backend_options(backend)), Error);
     } else {
       const FrameStats lit = render(lit_scene, backend, outputs, fb);
       EXPECT_GT(lit.counters.shadow_rays, 0u);
@@ -383,7 +384,7 @@ TEST_F(CostsNothing, DifferenceNormalsFetchOnlyBricksThatCanContribute) {
         SCOPED_TRACE(backend + " " + normals + " " + mode);
         const Scene sc = scene(mode + R"(, "shading": {"normals": ")" + normals + "\"}", 96);
         if (!testing::shades_as_asked(backend, sc.shading)) {
-          EXPECT_THROW(RenderSession(sc, RenderSession::Options{.backend = backend}), Error);
+          EXPECT_THROW(RenderSession(sc, testing::backend_options(backend)), Error);
           continue;
         }
         const std::set<uint64_t> keys = fetched(sc, backend, FrameOutputs{.depth = true, .normals = true});

@@ -221,6 +221,15 @@ TEST_F(Datasets, ManifestsOfUnknownKindsOrWithoutAMeshAreFormatErrors) {
     EXPECT_EQ(e.field(), "kind");
     EXPECT_NE(e.message().find("unknown dataset kind 'hexahedral'"), std::string::npos) << e.what();
   }
+  std::string old_version = text;
+  old_version.replace(old_version.find("\"format_version\": 2"), 19, "\"format_version\": 1");
+  try {
+    Manifest::from_json(old_version, "old.store");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::format);
+    EXPECT_EQ(e.field(), "format_version");
+  }
   std::string no_mesh = text;
   no_mesh.replace(no_mesh.find("\"mesh\""), 6, "\"mush\"");
   try {
