@@ -1,7 +1,7 @@
 #pragma once
 /// @file corner_lanes.h
 /// @brief The corner values of 8 trilinear cells of one brick side by side, for a DVR sample
-/// run (gigavoxels.cpp, sample_run): AVX2 gathers where the voxels are 16-bit or float, one
+/// run (dvr.cpp, sample_run): AVX2 gathers where the voxels are 16-bit or float, one
 /// load at a time otherwise.
 
 #include <cstdint>
