@@ -196,8 +196,10 @@ double Tracer<Voxel>::refine_hit(const Levels& lv, double lambda, double t0, dou
   const NodeFrame& frame = blend(lv, lambda).finer->frame;
   const double voxels = (t1 - t0) * double(r.m_) * length(Vec3d(frame.dir[0], frame.dir[1], frame.dir[2]));
   const int steps = voxels > 0 ? int(std::clamp(double(r.p_.refine) + std::ceil(std::log2(voxels)), 0.0, 60.0)) : 0;
-  // The first surface crossed between the two samples.
+  // The first surface crossed between the two samples (one is, by the caller's test: at t1 at
+  // the latest, where the bisection of a surface met only there returns).
   double best = t1;
+  bool found = false;
   for (const auto& surface : r.scene_.isosurfaces) {
     const double g0 = v0 - surface.value, g1 = v1 - surface.value;
     if (!((g0 < 0) != (g1 < 0) || g1 == 0)) continue;
@@ -208,7 +210,7 @@ double Tracer<Voxel>::refine_hit(const Levels& lv, double lambda, double t0, dou
           return double(sample(lv, lambda, m, nullptr)) - iso;
         },
         t0, t1, g0, g1, steps);
-    if (th < best) best = th, hit_surface = int(&surface - r.scene_.isosurfaces.data());
+    if (!found || th < best) best = th, hit_surface = int(&surface - r.scene_.isosurfaces.data()), found = true;
   }
   hit_levels = lv;
   hit_lambda = lambda;

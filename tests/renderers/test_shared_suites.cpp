@@ -33,8 +33,9 @@ class SharedSuites : public ::testing::Test {
   static void TearDownTestSuite() { delete dir_; }
 
   /// A 48x48 scene at full resolution (quality.lod_ratio 0.01 for level-of-detail back ends).
-  static Scene scene(const std::string& store, const std::string& backend, const std::string& what) {
-    const std::string text = R"({"dataset": ")" + store + R"(", "backend": ")" + backend + R"(", "image": {"width": 48, "height": 48},
+  static Scene scene(const std::string& store, const std::string& backend, const std::string& what, int size = 48) {
+    const std::string text = R"({"dataset": ")" + store + R"(", "backend": ")" + backend + R"(", "image": {"width": )" +
+                             std::to_string(size) + R"(, "height": )" + std::to_string(size) + R"(},
         "quality": {"lod_ratio": 0.01}, "cache": {"l1": "8MiB", "l2": "8MiB"},
         "camera": {"eye": [1.6, -0.9, 1.3], "target": [0.5, 0.5, 0.45], "fov_degrees": 35}, )" + what + "}";
     return parse_scene(text, dir_->file("scene.json"));
@@ -89,8 +90,9 @@ TEST_F(SharedSuites, FramesAreBitIdenticalOnOneThreadAndOnTwo) {
   for (RenderMode mode : {RenderMode::iso, RenderMode::dvr, RenderMode::mip})
     for (const std::string& backend : backends_for(mode)) {
       SCOPED_TRACE(backend + " " + std::string(to_string(mode)));
+      // 96x96: 36 tiles, enough work for a second thread to join.
       const Scene s = scene(mode == RenderMode::iso ? "sphere.store" : "fbm.store", backend,
-                            mode == RenderMode::iso ? kIsoLit : mode == RenderMode::dvr ? kDvrLit : kMip);
+                            mode == RenderMode::iso ? kIsoLit : mode == RenderMode::dvr ? kDvrLit : kMip, 96);
       FrameBuffers one, two;
       FrameStats one_stats, two_stats;
       {
@@ -100,9 +102,10 @@ TEST_F(SharedSuites, FramesAreBitIdenticalOnOneThreadAndOnTwo) {
       }
       EXPECT_EQ(one_stats.tile_threads, 1);
       // Two threads: an arena of two, rendered again (on a fresh session) until two threads did
-      // render tiles, so that the comparison is not of one thread against itself.
+      // render tiles, so that the comparison is not of one thread against itself. On a busy
+      // machine the second worker may join a fast frame too late to take a tile: try again.
       tbb::task_arena arena(2);
-      for (int attempt = 0; attempt < 20 && two_stats.tile_threads < 2; ++attempt)
+      for (int attempt = 0; attempt < 100 && two_stats.tile_threads < 2; ++attempt)
         arena.execute([&] {
           RenderSession session(s);
           two_stats = testing::render_settled(session, two, FrameOutputs{.depth = true, .normals = true});
@@ -112,7 +115,7 @@ TEST_F(SharedSuites, FramesAreBitIdenticalOnOneThreadAndOnTwo) {
       EXPECT_EQ(one_stats.counters.rays, two_stats.counters.rays);
       EXPECT_EQ(one_stats.counters.samples, two_stats.counters.samples);
       int drawn = 0;  // not vacuous: something was drawn
-      for (int i = 0; i < 48 * 48; ++i) drawn += one.color.data()[i].a > 0;
+      for (int i = 0; i < 96 * 96; ++i) drawn += one.color.data()[i].a > 0;
       EXPECT_GT(drawn, 100);
     }
 }

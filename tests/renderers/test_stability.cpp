@@ -433,6 +433,34 @@ TEST_F(Stability, IsovaluesEqualToVoxelValuesAndConstantCellsAtTheIsovalue) {
       }
 }
 
+TEST_F(Stability, ASurfaceTheRayStartsOnTakesItsOwnColour) {
+  // f = min(z, 8) on 17x17x13: seen from above, every ray enters the plateau at the isovalue 8
+  // and starts on that surface (the second of two), not on the first (3, below it). The top
+  // bricks (z from 8 to 12) are not constant (their apron reaches z = 7), so the ray's first
+  // sample, not a constant node, meets the surface. Unlit, a hit pixel is its surface's colour.
+  const SeparableField f{{17, 17, 13}, [](int a, int64_t i) { return a == 2 ? double(std::min<int64_t>(i, 8)) : 0.0; }};
+  const std::string ds = build_array(*dir_, "plateau2", f.dims, f.values());
+  for (const std::string& backend : backends_for(RenderMode::iso)) {
+    Scene s = make_scene(ds, backend, RenderMode::iso, 15);
+    s.shading.light = LightKind::none;
+    s.isosurfaces = {Isosurface{3.0, Vec3f(1.0f, 0.0f, 0.0f)}, Isosurface{8.0, Vec3f(0.0f, 1.0f, 0.0f)}};
+    const Rendered r = render_world(s, look({8, 8, 40}, {8, 8, 0}, {0, 1, 0}, 20));
+    // Where the ray enters, or (a marcher's first sample) within one of its steps of it.
+    const double step = backend == "reference" ? 1e-4 : RenderSession(s).params()["step"];
+    int green = 0;
+    for (int y = 0; y < 15; ++y)
+      for (int x = 0; x < 15; ++x) {
+        if (r.fb.color(x, y).a == 0) continue;
+        EXPECT_EQ(r.fb.color(x, y), (Rgbaf{0.0f, 1.0f, 0.0f, 1.0f})) << backend << " pixel " << x << " " << y;
+        const double entry = intersect(r.camera.ray(x + 0.5, y + 0.5, 15, 15), r.world).t0;
+        EXPECT_GE(r.fb.depth(x, y), entry - 1e-4) << backend;
+        EXPECT_LE(r.fb.depth(x, y), entry + step + 1e-4) << backend;
+        ++green;
+      }
+    EXPECT_GT(green, 100) << backend;
+  }
+}
+
 TEST_F(Stability, CamerasInsideTheVolumeAndOnItsFaces) {
   const SeparableField f = octahedron();
   struct View {
