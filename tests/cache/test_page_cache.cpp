@@ -182,6 +182,49 @@ TEST(PageCache, BudgetsSmallerThanOnePageOfAKindNameTheKind) {
   }
 }
 
+TEST(PageCache, FeedbackAndPrioritiesServeEveryKind) {
+  FakeSource source;
+  PageCache cache(source, two_kinds());
+  const PageKey page{RecordKind::octree_page, 3}, brick{RecordKind::brick, 3};
+  cache.frame_begin();
+  cache.mark_visible(page, false);
+  cache.mark_visible(brick, true);
+  cache.request(page, 1);
+  cache.request({RecordKind::octree_page, 4}, 9);
+  cache.request(brick, 5);
+  EXPECT_EQ(cache.visibility(page), std::nullopt);  // readable once the frame has ended
+  cache.frame_end();
+  EXPECT_EQ(cache.visibility(page), std::optional<bool>(false));
+  EXPECT_EQ(cache.visibility(brick), std::optional<bool>(true));
+  // The frame's requests, merged, highest priority first, each with its kind.
+  const std::vector<PageRequest> asked = cache.frame_requests();
+  ASSERT_EQ(asked.size(), 3u);
+  EXPECT_EQ(asked[0].key, (PageKey{RecordKind::octree_page, 4}));
+  EXPECT_EQ(asked[1].key, brick);
+  EXPECT_EQ(asked[2].key, page);
+  cache.wait_idle();
+  EXPECT_TRUE(cache.resident(page));
+  EXPECT_TRUE(cache.resident(brick));
+}
+
+TEST(PageCache, UsageFeedbackProtectsAPageOfAnyKindUnderLruFrame) {
+  FakeSource source;
+  CacheConfig c = two_kinds();
+  c.l1_policy = "lru-frame";
+  PageCache cache(source, c);  // three octree slots
+  for (uint64_t id = 0; id < 3; ++id) (void)cache.fetch({RecordKind::octree_page, id});
+  cache.frame_begin();
+  for (uint64_t id = 0; id < 3; ++id) cache.mark_used({RecordKind::octree_page, id});  // all used this frame
+  cache.frame_end();
+  // Every slot is protected by this frame's use: a new page cannot evict one, so the blocking
+  // fetch hands back a private copy and every page used stays.
+  const PageHandle extra = cache.fetch({RecordKind::octree_page, 7});
+  EXPECT_TRUE(holds_page(extra, {RecordKind::octree_page, 7}, 256));
+  EXPECT_EQ(extra.slot(), kNoSlot);
+  for (uint64_t id = 0; id < 3; ++id) EXPECT_TRUE(cache.resident({RecordKind::octree_page, id})) << id;
+  EXPECT_GT(cache.stats(RecordKind::octree_page).l1.failed_evictions, 0u);
+}
+
 /// A source whose reads take a while (so that requests are still queued and being read when
 /// the cache is destroyed), counting the readers open and the reads begun and ended.
 class SlowSource final : public PageSource {

@@ -94,5 +94,23 @@ TEST(CliCache, FlightRecordsATraceThatCachebenchReplays) {
   EXPECT_TRUE(contains(r.output, "nothing.json: cannot open")) << r.output;
 }
 
+TEST(CliCache, CachebenchReplaysTracesOfSeveralRecordKindsOrOneOfThem) {
+  testing::TempDir dir;
+  // Keys 1-3 of two kinds: six objects, each read twice.
+  std::ofstream(dir.file("mixed.txt")) << "1 64\n2 64\n3 64\n1 256 octree_page\n2 256 octree_page\n3 256 octree_page\n"
+                                          "1 64\n2 64\n3 64\n1 256 octree_page\n2 256 octree_page\n3 256 octree_page\n";
+  const auto all = brickyard("cachebench " + dir.file("mixed.txt") + " --policies lru --sizes 100%");
+  ASSERT_EQ(all.exit_code, 0) << all.output;
+  EXPECT_TRUE(contains(all.output, "12 requests, 0 prefetch fills, 6 objects")) << all.output;
+  EXPECT_TRUE(contains(all.output, "record kinds: brick 3 objects")) << all.output;
+  EXPECT_TRUE(contains(all.output, "octree_page 3 objects")) << all.output;
+  const auto one = brickyard("cachebench " + dir.file("mixed.txt") + " --kind octree_page --policies lru --sizes 100%");
+  ASSERT_EQ(one.exit_code, 0) << one.output;
+  EXPECT_TRUE(contains(one.output, "6 requests, 0 prefetch fills, 3 objects")) << one.output;
+  const auto bad = brickyard("cachebench " + dir.file("mixed.txt") + " --kind voxel");
+  EXPECT_EQ(bad.exit_code, 2) << bad.output;
+  EXPECT_TRUE(contains(bad.output, "unknown record kind 'voxel'")) << bad.output;
+}
+
 }  // namespace
 }  // namespace brickyard
