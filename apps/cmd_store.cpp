@@ -20,6 +20,7 @@
 #include "core/units.h"
 #include "fields/field.h"
 #include "preprocess/builder.h"
+#include "preprocess/octree_builder.h"
 #include "preprocess/export.h"
 #include "preprocess/volume_source.h"
 #include "storage/store.h"
@@ -46,7 +47,7 @@ struct ImportOptions {
   int brick_size = 32, apron = 1, hc_level = 9;
   std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size;
   double constant_tolerance = 0;
-  bool no_shuffle = false, no_map_growth = false, force = false;
+  bool no_shuffle = false, no_map_growth = false, force = false, octree = false;
 };
 
 bool has_extension(const std::string& path, std::initializer_list<const char*> exts) {
@@ -136,7 +137,10 @@ void run_import(const ImportOptions& o) {
   const BuildResult r = build_store(*source, o.out, b, &progress);
   if (!r.up_to_date) progress.finish();  // otherwise it ends without a closing line: no work done
   if (r.up_to_date) {
-    std::cout << fmt::format("{} is complete and up to date; nothing to do (--force rebuilds)\n", o.out);
+    const bool octree_missing = o.octree && !r.manifest.octree;
+    std::cout << fmt::format("{} is complete and up to date; {}\n", o.out,
+                             octree_missing ? "building its octree" : "nothing to do (--force rebuilds)");
+    if (octree_missing) run_build_octree(o.out, {});
     return;
   }
   if (r.rebuilt_incomplete) std::cout << "an interrupted earlier build was discarded and rebuilt\n";
@@ -144,6 +148,7 @@ void run_import(const ImportOptions& o) {
                            r.manifest.levels, format_bytes(double(r.stored_bytes)), format_bytes(double(r.input_bytes)),
                            double(r.input_bytes) / std::max<double>(1, double(r.stored_bytes)), format_duration(r.seconds),
                            format_bytes(double(r.input_bytes) / std::max(1e-9, r.seconds)));
+  if (o.octree) run_build_octree(o.out, {});
 }
 
 // ------------------------------------------------------------------------------------- info
@@ -230,6 +235,7 @@ void run_info(const std::string& path, bool json) {
   std::cout << fmt::format("histogram [{:g}, {:g}] |{}|\n", h.lo, h.hi, sparkline(h, 64));
   std::cout << fmt::format("quantiles p1 {:g}  p10 {:g}  p50 {:g}  p90 {:g}  p99 {:g}\n\n", h.quantile(0.01),
                            h.quantile(0.1), h.quantile(0.5), h.quantile(0.9), h.quantile(0.99));
+  print_octree_info(m);
   std::cout << "source " << nlohmann::json::parse(m.source).dump() << "\n";
   std::cout << "build  " << nlohmann::json::parse(m.build).dump() << "\n";
 }
@@ -427,6 +433,8 @@ void add_store_commands(CLI::App& app, int& exit_status) {
         ->capture_default_str()->group(build);
     cmd->add_option("--map-size", o->map_size, "Initial LMDB map size, e.g. 64MiB (default: from the input size)")->group(build);
     cmd->add_flag("--no-map-growth", o->no_map_growth, "Fail instead of growing the map when it is full")->group(build);
+    cmd->add_flag("--octree", o->octree, "Also build the octree volume (lossless; see build-octree for its options)")
+        ->group(build);
     cmd->add_flag("--force", o->force, "Rebuild a complete store made from another source or with other parameters")
         ->group(build);
     cmd->callback([o] { run_import(*o); });

@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   cli::add_version_command(app);
   int exit_status = 0;
   cli::add_store_commands(app, exit_status);
+  cli::add_octree_commands(app);
   cli::add_cache_commands(app);
   cli::add_render_commands(app);
 

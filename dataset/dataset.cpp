@@ -32,4 +32,14 @@ const TetView& Dataset::tets() const {
   return *tets_;
 }
 
+const OctreeView& Dataset::octree() const {
+  if (!octree_) {
+    if (info_.kind != DataKind::structured) no_view(info_, "octree");
+    throw Error(Errc::unsupported,
+                fmt::format("the grid has no octree volume; build one with 'brickyard build-octree {}'", info_.name))
+        .with_file(info_.name);
+  }
+  return *octree_;
+}
+
 }  // namespace brickyard

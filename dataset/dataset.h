@@ -2,7 +2,7 @@
 /// @file dataset.h
 /// @brief A dataset as every back end sees it: a generic part (kind, world box, value range,
 /// time steps, provenance) and typed views asked for by kind (the grid's layout and node table,
-/// a tetrahedral mesh's cluster table; an octree volume's next).
+/// an octree volume beside a grid, a tetrahedral mesh's cluster table).
 ///
 /// Whoever opens a dataset (a store, session/) builds its Dataset and owns what the views point
 /// to: a Dataset and its views are valid while that opener is. Immutable after construction,
@@ -15,6 +15,7 @@
 
 #include "core/math.h"
 #include "dataset/grid.h"
+#include "dataset/octree.h"
 #include "dataset/tet.h"
 
 namespace brickyard {
@@ -46,24 +47,30 @@ struct DatasetInfo {
 /// @brief A dataset: its generic part and the typed views its kind has.
 class Dataset {
  public:
-  Dataset(DatasetInfo info, std::optional<GridView> grid, std::optional<TetView> tets = std::nullopt)
-      : info_(std::move(info)), grid_(std::move(grid)), tets_(std::move(tets)) {}
+  Dataset(DatasetInfo info, std::optional<GridView> grid, std::optional<TetView> tets = std::nullopt,
+          std::optional<OctreeView> octree = std::nullopt)
+      : info_(std::move(info)), grid_(std::move(grid)), tets_(std::move(tets)), octree_(std::move(octree)) {}
 
   const DatasetInfo& info() const { return info_; }
   DataKind kind() const { return info_.kind; }
 
   bool has_grid() const { return grid_.has_value(); }
   bool has_tets() const { return tets_.has_value(); }
+  bool has_octree() const { return octree_.has_value(); }
   /// @brief The grid view. @throws Error(unsupported) naming the dataset and its kind when it
   /// has none, so a back end built for grids is refused before its first frame.
   const GridView& grid() const;
   /// @brief The tetrahedral mesh's view. @throws Error(unsupported) when the dataset has none.
   const TetView& tets() const;
+  /// @brief The octree volume's view. @throws Error(unsupported) naming the dataset, with the
+  /// command that builds one, when the grid has none.
+  const OctreeView& octree() const;
 
  private:
   DatasetInfo info_;
   std::optional<GridView> grid_;
   std::optional<TetView> tets_;
+  std::optional<OctreeView> octree_;
 };
 
 }  // namespace brickyard

@@ -105,6 +105,16 @@ Database Env::open_database(const std::string& name, bool create) {
   return {dbi, name};
 }
 
+void Env::clear_database(const Database& db) {
+  MDB_txn* txn = nullptr;
+  if (int rc = mdb_txn_begin(env_, nullptr, 0, &txn)) fail(rc, "mdb_txn_begin (write)", path_, db.name);
+  if (int rc = mdb_drop(txn, db.dbi, 0)) {
+    mdb_txn_abort(txn);
+    fail(rc, "mdb_drop", path_, db.name);
+  }
+  if (int rc = mdb_txn_commit(txn)) fail(rc, "mdb_txn_commit", path_, db.name);
+}
+
 bool Env::has_database(const std::string& name) {
   MDB_txn* txn = nullptr;
   if (int rc = mdb_txn_begin(env_, nullptr, MDB_RDONLY, &txn)) fail(rc, "mdb_txn_begin", path_, name);

@@ -67,6 +67,8 @@ class Env {
   /// @brief Opens a named database; creates it when the environment is writable and
   /// `create` is set. A missing database in read-only mode is Error(not_found).
   Database open_database(const std::string& name, bool create);
+  /// @brief Deletes every record of a database in one committed transaction (mdb_drop).
+  void clear_database(const Database& db);
   /// @brief Whether a named database exists.
   bool has_database(const std::string& name);
   /// @brief Names of the named databases, and whether the main database holds anything else.

@@ -61,6 +61,14 @@ std::string Manifest::to_json() const {
     st.push_back({{"bricks", s.bricks}, {"constant", s.constant}, {"empty", s.empty}, {"raw_bytes", s.raw_bytes},
                   {"stored_bytes", s.stored_bytes}});
   j["level_stats"] = st;
+  if (octree) {
+    const OctreeSummary& o = *octree;
+    j["octree"] = {{"depth", o.depth}, {"pages", o.pages}, {"interior_nodes", o.interior_nodes}, {"caps", o.caps},
+                   {"consolidated", o.consolidated}, {"bytes", o.bytes}, {"stored_bytes", o.stored_bytes},
+                   {"raw_bytes", o.raw_bytes}, {"tolerance", o.tolerance}, {"max_error", o.max_error},
+                   {"page_bytes", o.page_bytes}};
+    j["octree"]["clamp"] = o.clamped ? json{o.clamp_lo, o.clamp_hi} : json(nullptr);
+  }
   return j.dump(2);
 }
 
@@ -179,6 +187,36 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
     Reader rs{s, path};
     m.stats.push_back({rs.get<int64_t>("bricks"), rs.get<int64_t>("constant"), rs.get<int64_t>("empty"),
                        rs.get<uint64_t>("raw_bytes"), rs.get<uint64_t>("stored_bytes")});
+  }
+  if (j.contains("octree")) {
+    const json& oj = r.at("octree");
+    if (!oj.is_object()) throw Error(Errc::format, "not an object").with_file(path).with_field("octree");
+    Reader ro{oj, path};
+    OctreeSummary o;
+    o.depth = ro.get<int>("depth");
+    o.pages = ro.get<uint64_t>("pages");
+    o.interior_nodes = ro.get<uint64_t>("interior_nodes");
+    o.caps = ro.get<uint64_t>("caps");
+    o.consolidated = ro.get<uint64_t>("consolidated");
+    o.bytes = ro.get<uint64_t>("bytes");
+    o.stored_bytes = ro.get<uint64_t>("stored_bytes");
+    o.raw_bytes = ro.get<uint64_t>("raw_bytes");
+    o.tolerance = ro.get<double>("tolerance");
+    o.max_error = ro.get<double>("max_error");
+    o.page_bytes = ro.get<uint64_t>("page_bytes");
+    const json& clamp = ro.at("clamp");
+    if (!clamp.is_null()) {
+      const auto c = ro.get<std::vector<double>>("clamp");
+      if (c.size() != 2) throw Error(Errc::format, "expected [lo, hi] or null").with_file(path).with_field("octree.clamp");
+      o.clamped = true, o.clamp_lo = c[0], o.clamp_hi = c[1];
+    }
+    const OctreeLayout ol = OctreeLayout::make(m.dims, m.format.type);
+    if (o.depth != ol.depth || o.page_bytes != ol.page_bytes())
+      throw Error(Errc::format, fmt::format("octree of depth {} with {}-byte pages, but the grid's dims give depth {} "
+                                            "and {}-byte pages", o.depth, o.page_bytes, ol.depth, ol.page_bytes()))
+          .with_file(path)
+          .with_field("octree");
+    m.octree = o;
   }
   // The layout must agree with the recorded level count, or nothing else can be trusted.
   const GridLayout layout = m.layout();

@@ -8,12 +8,14 @@
 /// build was interrupted at any moment never claims to be complete.
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/math.h"
 #include "dataset/dataset.h"
 #include "dataset/grid.h"
+#include "dataset/octree.h"
 #include "storage/brick_codec.h"
 
 namespace brickyard {
@@ -62,6 +64,9 @@ struct Manifest {
   double background = 0;
   Histogram histogram;
   std::vector<LevelStats> stats;
+  /// An octree volume beside the bricks (`octree` database), written by build-octree; absent
+  /// until one is complete.
+  std::optional<OctreeSummary> octree;
   /// JSON objects, kept as canonical text so the JSON library stays inside storage/*.cpp.
   std::string source = "{}";  ///< provenance: kind, path, size, checksum, parameters
   std::string build = "{}";   ///< build parameters (downsampling, tolerance, clamp, ...)

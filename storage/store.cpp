@@ -1,5 +1,6 @@
 #include "storage/store.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
@@ -45,10 +46,15 @@ uint64_t id_from_big_endian(lmdb::Bytes key) {
 }
 
 bool known_database(const std::string& name) {
-  for (const char* known : {kManifestDb, kNodesDb, kBricksDb, kTetClustersDb, kTetsDb})
+  for (const char* known : {kManifestDb, kNodesDb, kBricksDb, kTetClustersDb, kTetsDb, kOctreeDb})
     if (name == known) return true;
   return false;
 }
+
+// The octree's page table lives in its database under keys no page has (a page id's top byte
+// is its root depth, at most 19 << 1).
+constexpr uint64_t kOctreeTableKey = uint64_t(0xff) << 56;
+bool is_octree_table_key(lmdb::Bytes key) { return key.size() == 8 && key[0] == std::byte{0xff}; }
 
 uint64_t elapsed_ns(std::chrono::steady_clock::time_point since) {
   return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - since).count());
@@ -112,13 +118,13 @@ void remove_store_files(const std::string& dir) {
 }
 
 namespace {
-std::unique_ptr<lmdb::Env> open_existing(const std::string& dir) {
+std::unique_ptr<lmdb::Env> open_existing(const std::string& dir, bool writable = false) {
   std::error_code ec;
   if (!fs::exists(dir, ec)) throw Error(Errc::not_found, "no such store").with_file(dir);
   if (!fs::is_directory(dir, ec)) throw Error(Errc::format, "not a brickyard store (not a directory)").with_file(dir);
   if (!is_store_directory(dir)) throw Error(Errc::format, "not a brickyard store (no data.mdb)").with_file(dir);
   lmdb::EnvOptions options;
-  options.read_only = true;
+  options.read_only = !writable;
   auto env = std::make_unique<lmdb::Env>(dir, options);
   if (!env->has_database(kManifestDb)) throw Error(Errc::format, "not a brickyard store (no manifest)").with_file(dir);
   return env;
@@ -139,7 +145,7 @@ Manifest read_manifest(const std::string& dir) {
 }
 
 Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
-  env_ = open_existing(dir);
+  env_ = open_existing(dir, options.writable);
   manifest_db_ = env_->open_database(kManifestDb, false);
   manifest_ = load_manifest(*env_, manifest_db_, dir);
   if (!manifest_.complete && !options.allow_incomplete)
@@ -167,8 +173,17 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
   load_node_table();
   info.world = Box3d(manifest_.origin, manifest_.origin + manifest_.spacing * Vec3d(manifest_.dims - Vec3s(1)));
   info.unit_length = min_component(manifest_.spacing);
+  std::optional<OctreeView> octree;
+  if (env_->has_database(kOctreeDb)) octree_db_ = env_->open_database(kOctreeDb, false);
+  if (manifest_.octree) {
+    if (!env_->has_database(kOctreeDb))
+      throw Error(Errc::corrupt, "the manifest records an octree volume but the store has no octree database").with_file(dir);
+    load_octree_table();
+    octree.emplace(octree_layout(), *manifest_.octree, std::span<const OctreePageRange>(octree_pages_));
+  }
   dataset_ = std::make_unique<Dataset>(std::move(info),
-                                       GridView(nodes_, manifest_.format.shape(), manifest_.origin, manifest_.spacing));
+                                       GridView(nodes_, manifest_.format.shape(), manifest_.origin, manifest_.spacing),
+                                       std::nullopt, std::move(octree));
 }
 
 void Store::load_node_table() {
@@ -198,6 +213,24 @@ void Store::load_node_table() {
       std::memcpy(records.data() + start, value->data(), value->size());
     }
   }
+}
+
+void Store::load_octree_table() {
+  octree_pages_.resize(size_t(manifest_.octree->pages));
+  lmdb::ReadTxn txn(*env_);
+  for (size_t start = 0, chunk = 0; start < octree_pages_.size(); start += kNodesPerChunk, ++chunk) {
+    auto value = txn.get(octree_db_, big_endian_id(kOctreeTableKey | chunk));
+    const size_t n = std::min(kNodesPerChunk, octree_pages_.size() - start);
+    if (!value || value->size() != n * sizeof(OctreePageRange))
+      throw Error(Errc::corrupt, fmt::format("octree page table chunk {} is {}", chunk,
+                                             value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(OctreePageRange))
+                                                   : "missing"))
+          .with_file(path_);
+    std::memcpy(octree_pages_.data() + start, value->data(), value->size());
+  }
+  for (size_t i = 1; i < octree_pages_.size(); ++i)
+    if (!(octree_pages_[i - 1].id < octree_pages_[i].id))
+      throw Error(Errc::corrupt, fmt::format("octree page table is not sorted at entry {}", i)).with_file(path_);
 }
 
 void Store::load_cluster_table() {
@@ -269,7 +302,9 @@ std::vector<PageKindInfo> Store::page_kinds() const {
   if (kind() == DataKind::tetrahedral) return {{RecordKind::tet_cluster, size_t(manifest_.mesh.page_bytes), manifest_.mesh.clusters}};
   uint64_t stored = 0;
   for (const LevelStats& l : manifest_.stats) stored += uint64_t(l.bricks - l.constant);
-  return {{RecordKind::brick, format().bytes(), stored}};
+  std::vector<PageKindInfo> kinds{{RecordKind::brick, format().bytes(), stored}};
+  if (manifest_.octree) kinds.push_back({RecordKind::octree_page, size_t(manifest_.octree->page_bytes), manifest_.octree->pages});
+  return kinds;
 }
 
 std::unique_ptr<PageReader> Store::open_reader() const { return std::make_unique<StoreReader>(*this); }
@@ -277,12 +312,14 @@ std::unique_ptr<PageReader> Store::open_reader() const { return std::make_unique
 std::string Store::describe(const PageKey& key) const {
   if (key.kind == RecordKind::brick) return BrickKey::from_code(key.id).to_string();
   if (key.kind == RecordKind::tet_cluster) return fmt::format("cluster {}", key.id);
+  if (key.kind == RecordKind::octree_page) return describe_octree_page(key.id);
   return to_string(key);
 }
 
 PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const {
   const bool brick = key.kind == RecordKind::brick && kind() == DataKind::structured;
   const bool cluster = key.kind == RecordKind::tet_cluster && kind() == DataKind::tetrahedral;
+  if (key.kind == RecordKind::octree_page && manifest_.octree) return read_octree_page(txn, key, out);
   if (!brick && !cluster)
     throw Error(Errc::not_found, fmt::format("a {} store holds no {} records", to_string(kind()), to_string(key.kind)))
         .with_file(path_)
@@ -336,8 +373,51 @@ PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::spa
   return read;
 }
 
+PageRead Store::read_octree_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const {
+  const OctreeLayout layout = octree_layout();
+  if (out.size() != manifest_.octree->page_bytes)
+    throw Error(Errc::internal, fmt::format("a {}-byte buffer for {}-byte octree pages", out.size(), manifest_.octree->page_bytes));
+  const BrickKey root = BrickKey::from_code(key.id);
+  const Vec3s nodes = root.level <= uint32_t(layout.cap_page_root()) ? layout.nodes_at(int(root.level)) : Vec3s(0);
+  if (!layout.is_page_root(int(root.level)) || int64_t(root.x) >= nodes.x || int64_t(root.y) >= nodes.y ||
+      int64_t(root.z) >= nodes.z)
+    throw Error(Errc::not_found, fmt::format("no page of an octree of depth {} is rooted there", layout.depth))
+        .with_file(path_)
+        .with_key(describe(key));
+  auto rec = txn.get(octree_db_, big_endian_id(key.id));
+  if (!rec)
+    throw Error(Errc::not_found, "the octree stores no such page (its subtree is consolidated or outside the volume)")
+        .with_file(path_)
+        .with_key(describe(key));
+  PageRead read;
+  read.stored_bytes = rec->size();
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    decode_page(key, *rec, out);
+    dispatch_value_type(layout.type, [&](auto t) {
+      const auto page = OctreePage<decltype(t)>::view(out, layout);
+      if (page.header->root_depth != root.level)
+        throw Error(Errc::corrupt, fmt::format("the page says it is rooted at depth {}", page.header->root_depth));
+    });
+  } catch (Error& e) {
+    e.with_file(path_).with_key(describe(key));
+    throw;
+  }
+  read.decode_ns = elapsed_ns(start);
+  return read;
+}
+
 void Store::for_each_page(const lmdb::ReadTxn& txn, RecordKind kind,
                           const std::function<bool(const PageKey&, std::span<const std::byte>)>& f) const {
+  if (kind == RecordKind::octree_page) {
+    if (!manifest_.octree) return;
+    txn.for_each(octree_db_, [&](lmdb::Bytes key, lmdb::Bytes value) {
+      if (is_octree_table_key(key)) return true;
+      if (key.size() != 8) throw Error(Errc::corrupt, fmt::format("octree page key of {} bytes", key.size())).with_file(path_);
+      return f({RecordKind::octree_page, id_from_big_endian(key)}, value);
+    });
+    return;
+  }
   if (kind == RecordKind::brick) {
     for_each_record(txn, [&](const BrickKey& k, std::span<const std::byte> r) { return f({RecordKind::brick, k.code()}, r); });
     return;
@@ -434,6 +514,52 @@ void StoreWriter::commit_final(Manifest m) {
   writer_->put(manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(text));
   env_->set_no_sync(false);
   writer_->commit();
+}
+
+// ------------------------------------------------------------------------------ OctreeWriter
+
+OctreeWriter::OctreeWriter(Store& store, uint64_t batch_bytes) : store_(store) {
+  if (store.kind() != DataKind::structured)
+    throw Error(Errc::unsupported, "an octree volume is built over a grid; this store is a tetrahedral mesh").with_file(store.path());
+  if (store.env_->options().read_only) throw Error(Errc::internal, "OctreeWriter needs a store opened writable").with_file(store.path());
+  writer_ = std::make_unique<lmdb::BatchWriter>(*store.env_, batch_bytes);
+  if (store.manifest_.octree) {  // the manifest stops claiming the old octree before its pages go
+    Manifest m = store.manifest_;
+    m.octree.reset();
+    writer_->put(store.manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(m.to_json()));
+    writer_->commit();
+    store.manifest_ = m;
+  }
+  store.octree_db_ = store.env_->open_database(kOctreeDb, true);
+  store.env_->clear_database(store.octree_db_);
+}
+
+OctreeWriter::~OctreeWriter() = default;
+
+size_t OctreeWriter::put_page(uint64_t id, std::span<const std::byte> page) {
+  auto record = encode_page({RecordKind::octree_page, id}, page);
+  const size_t n = record.size();
+  writer_->put(store_.octree_db_, big_endian_id(id), std::move(record));
+  return n;
+}
+
+void OctreeWriter::finish(const OctreeSummary& summary, std::vector<OctreePageRange> pages) {
+  BY_CHECK_EQ(summary.pages, uint64_t(pages.size()));
+  std::sort(pages.begin(), pages.end(), [](const OctreePageRange& a, const OctreePageRange& b) { return a.id < b.id; });
+  writer_->commit();
+  store_.env_->sync();  // every page is durable before the manifest claims the octree
+  for (size_t start = 0, chunk = 0; start < pages.size(); start += kNodesPerChunk, ++chunk) {
+    const size_t n = std::min(kNodesPerChunk, pages.size() - start);
+    const auto* bytes = reinterpret_cast<const std::byte*>(pages.data() + start);
+    writer_->put(store_.octree_db_, big_endian_id(kOctreeTableKey | chunk), std::span<const std::byte>(bytes, n * sizeof(OctreePageRange)));
+  }
+  Manifest m = store_.manifest_;
+  m.octree = summary;
+  writer_->put(store_.manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(m.to_json()));
+  writer_->commit();
+  store_.env_->sync();
+  store_.manifest_ = m;
+  store_.octree_pages_ = std::move(pages);
 }
 
 }  // namespace brickyard

@@ -4,6 +4,8 @@
 /// `manifest` (JSON) says what the dataset is (its kind); the others hold its records:
 /// - a grid (kind `structured`): `nodes` (the node table) and `bricks` (brick records keyed by
 ///   the big-endian level-major Morton code of their BrickKey);
+///   and, once build-octree has run, `octree` (octree volume pages keyed by the big-endian id
+///   of dataset/octree.h);
 /// - a tetrahedral mesh: `tet_clusters` (the cluster table) and `tets` (cluster page records
 ///   keyed by the big-endian cluster index).
 ///
@@ -34,6 +36,7 @@ inline constexpr const char* kNodesDb = "nodes";
 inline constexpr const char* kBricksDb = "bricks";
 inline constexpr const char* kTetClustersDb = "tet_clusters";
 inline constexpr const char* kTetsDb = "tets";
+inline constexpr const char* kOctreeDb = "octree";
 
 /// @brief Whether `dir` holds an LMDB environment (data.mdb), complete or not.
 bool is_store_directory(const std::string& dir);
@@ -53,6 +56,7 @@ class Store : public PageSource {
  public:
   struct OpenOptions {
     bool allow_incomplete = false;  ///< for `info` and `verify`, which report incomplete stores
+    bool writable = false;          ///< for build-octree, which adds a database (OctreeWriter)
   };
 
   /// @throws Error(not_found) no such directory; Error(format) not a store or incomplete;
@@ -74,6 +78,11 @@ class Store : public PageSource {
   const NodeTable& nodes() const { return nodes_; }
   // Tetrahedral stores:
   const std::vector<TetCluster>& clusters() const { return clusters_; }
+  // Grid stores with an octree volume:
+  bool has_octree() const { return manifest_.octree.has_value(); }
+  const std::vector<OctreePageRange>& octree_pages() const { return octree_pages_; }
+  /// @brief The octree's geometry (any grid store: build-octree asks before there is one).
+  OctreeLayout octree_layout() const { return OctreeLayout::make(manifest_.dims, manifest_.format.type); }
 
   // PageSource: bricks of a grid store, cluster pages of a tetrahedral one.
   const std::string& source_name() const override { return path_; }
@@ -102,16 +111,20 @@ class Store : public PageSource {
   uint64_t record_count() const;
 
  private:
+  friend class OctreeWriter;
   void load_node_table();
   void load_cluster_table();
+  void load_octree_table();
+  PageRead read_octree_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const;
 
   std::string path_;
   std::unique_ptr<lmdb::Env> env_;
-  lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_;
+  lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_, octree_db_;
   Manifest manifest_;
   GridLayout layout_;
   NodeTable nodes_;
   std::vector<TetCluster> clusters_;
+  std::vector<OctreePageRange> octree_pages_;
   std::unique_ptr<Dataset> dataset_;
 };
 
@@ -141,6 +154,28 @@ class StoreWriter {
   DataKind kind_;
   std::unique_ptr<lmdb::Env> env_;
   lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_;
+  std::unique_ptr<lmdb::BatchWriter> writer_;
+};
+
+/// @brief Writes an octree volume into a grid store opened writable: the constructor removes any
+/// octree the store had (its manifest entry first, then its pages), so an interrupted build
+/// leaves a grid without an octree, never a half one; finish() records the summary in the
+/// manifest in the last transaction, after every page is durable.
+///
+/// Not thread-safe; reads of the store may go on beside it on other threads, each in short
+/// transactions (the map may grow when a batch commits, which needs no read open).
+class OctreeWriter {
+ public:
+  explicit OctreeWriter(Store& store, uint64_t batch_bytes = uint64_t(32) << 20);
+  ~OctreeWriter();
+  /// @brief A page's used bytes (encoded here); returns the record's size.
+  size_t put_page(uint64_t id, std::span<const std::byte> page);
+  /// @brief Commits the page table (every page written, sorted by id here) and records
+  /// `summary` (its build parameters included) in the manifest, in the last transaction.
+  void finish(const OctreeSummary& summary, std::vector<OctreePageRange> pages);
+
+ private:
+  Store& store_;
   std::unique_ptr<lmdb::BatchWriter> writer_;
 };
 
