@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <iostream>
 #include <mutex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -286,6 +287,38 @@ int verify_mesh(const std::string& path, const Store& store) {
   return bad.empty() ? 0 : 1;
 }
 
+/// A grid's octree volume: every page the table lists decodes (checksum, header, layout) and its
+/// root's range is the table's, and every stored page is in the table.
+size_t verify_octree(const std::string& path, const Store& store) {
+  if (!store.has_octree()) return 0;
+  const OctreeView& view = store.dataset().octree();
+  std::vector<std::string> bad;
+  std::set<uint64_t> listed;
+  for (const OctreePageRange& p : view.pages()) listed.insert(p.id);
+  auto txn = store.begin_read();
+  store.for_each_page(txn, RecordKind::octree_page, [&](const PageKey& k, std::span<const std::byte>) {
+    if (!listed.count(k.id)) bad.push_back(fmt::format("{}: stored but not in the page table", describe_octree_page(k.id)));
+    return true;
+  });
+  std::vector<std::byte> page(view.page_bytes());
+  for (const OctreePageRange& p : view.pages()) {
+    try {
+      store.read_page(txn, {RecordKind::octree_page, p.id}, page);
+      dispatch_value_type(view.layout().type, [&](auto tag) {
+        const auto v = OctreePage<decltype(tag)>::view(page, view.layout());
+        if (v.nodes[0][0].min != p.min || v.nodes[0][0].max != p.max)
+          bad.push_back(fmt::format("{}: root range [{}, {}], the table says [{}, {}]", describe_octree_page(p.id),
+                                    v.nodes[0][0].min, v.nodes[0][0].max, p.min, p.max));
+      });
+    } catch (const Error& e) {
+      bad.push_back(fmt::format("{}: {}", describe_octree_page(p.id), e.message()));
+    }
+  }
+  for (const std::string& b : bad) std::cout << "BAD " << b << "\n";
+  std::cout << fmt::format("{}: octree of {} pages decoded, {} problems\n", path, view.pages().size(), bad.size());
+  return bad.size();
+}
+
 int run_verify(const std::string& path) {
   Store store(path, {.allow_incomplete = true});
   if (!store.manifest().complete) {
@@ -363,7 +396,8 @@ int run_verify(const std::string& path) {
   std::sort(bad.begin(), bad.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   for (const auto& [k, why] : bad) std::cout << fmt::format("BAD {}: {}\n", k.to_string(), why);
   std::cout << fmt::format("{}: {} nodes, {} bricks decoded, {} problems\n", path, l.total_bricks(), decoded.load(), bad.size());
-  return bad.empty() ? 0 : 1;
+  const size_t octree_problems = verify_octree(path, store);
+  return bad.empty() && octree_problems == 0 ? 0 : 1;
 }
 
 // ----------------------------------------------------------------------------------- export

@@ -24,6 +24,7 @@ OctreeLayout OctreeLayout::make(const Vec3s& dims, ValueType type) {
     throw Error(Errc::invalid_argument, fmt::format("a grid of {} voxels per axis needs an octree of depth {}, deeper "
                                                     "than the {} its page keys address",
                                                     n, l.depth, kOctreeMaxDepth));
+  l.max_page_bytes = l.largest_page_bytes();
   return l;
 }
 
@@ -59,7 +60,7 @@ size_t OctreeLayout::page_bytes(std::span<const uint32_t> nodes_per_level, uint3
   return bytes + size_t(caps) * scalar_bytes();
 }
 
-size_t OctreeLayout::page_bytes() const {
+size_t OctreeLayout::largest_page_bytes() const {
   // Every page is at most full: 8^l nodes at its level l, and 8 caps under each bottom node.
   size_t largest = 0;
   for (int r = 0; r <= cap_page_root(); ++r) {

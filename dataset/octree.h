@@ -80,6 +80,7 @@ struct OctreeLayout {
   Vec3s dims{0};  ///< the finest grid
   int depth = 0;  ///< D
   ValueType type = ValueType::u8;
+  size_t max_page_bytes = 0;  ///< page_bytes(), computed once by make()
 
   /// @brief The layout over a grid; Error(invalid_argument) for an empty grid or one deeper
   /// than kOctreeMaxDepth.
@@ -103,7 +104,9 @@ struct OctreeLayout {
   /// @brief The id of the page rooted at depth r with root coordinates c.
   static uint64_t page_id(int r, const Vec3s& c) { return BrickKey{uint32_t(r), uint32_t(c.x), uint32_t(c.y), uint32_t(c.z)}.code(); }
   /// @brief The decoded size of every page (the largest a page can be).
-  size_t page_bytes() const;
+  size_t page_bytes() const { return max_page_bytes; }
+  /// @brief The largest page, computed.
+  size_t largest_page_bytes() const;
   /// @brief The decoded bytes of a page with these counts.
   size_t page_bytes(std::span<const uint32_t> nodes_per_level, uint32_t caps) const;
   size_t scalar_bytes() const { return 8 * size_of(type); }

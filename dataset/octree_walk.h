@@ -3,10 +3,12 @@
 /// @brief Descent of an octree volume from its root to the node holding one voxel of one
 /// level, across pages: the primitive of the single-ray mode, of verification and of tests.
 ///
-/// `GetPage` is `const std::byte*(uint64_t page_id)`: a decoded page (the cache's, or a test's
-/// map), or null when it is not resident; the walk then reports the depth it reached.
+/// `GetPage(uint64_t page_id)` returns a decoded page's bytes (the cache's, or a test's map) or a
+/// `const OctreePage<T>*` already parsed, or null when it is not resident; the walk then reports
+/// the depth it reached.
 
 #include <cstdint>
+#include <type_traits>
 
 #include "dataset/octree.h"
 
@@ -21,33 +23,51 @@ struct OctreeVoxel {
   uint64_t missing_page = 0;///< when !exact: the page that was not resident (0 if none was)
 };
 
-/// @brief The voxel v of level s (0: finest), v inside layout.level_dims(s).
+/// @brief The 8 scalars of the node at depth d and coordinates c (the voxels 2c + {0,1}^3 of
+/// its level), or, where a consolidated ancestor stands for it, the one value of its region.
+template <typename T>
+struct OctreeScalars {
+  const T* scalars = nullptr;  ///< into a page: valid while that page is
+  T constant{};                ///< when scalars is null and exact: every voxel of the node
+  int depth = 0;               ///< where the descent ended
+  bool exact = false;          ///< the node's own scalars, or a consolidated ancestor's value
+  uint64_t missing_page = 0;   ///< when !exact: the page that was not resident (0 if none)
+
+  T operator[](int octant) const { return scalars ? scalars[octant] : constant; }
+};
+
+namespace detail {
+template <typename T, typename P>
+OctreePage<T> as_octree_page(P p, const OctreeLayout& layout) {
+  if constexpr (std::is_same_v<P, const OctreePage<T>*>) return *p;
+  else return OctreePage<T>::view({p, layout.page_bytes()}, layout);
+}
+}  // namespace detail
+
 template <typename T, typename GetPage>
-OctreeVoxel<T> octree_voxel(const OctreeLayout& layout, GetPage&& get_page, int s, const Vec3s& v) {
-  const int target = layout.level_of_depth(s);  // the depth whose nodes hold level s
+OctreeScalars<T> octree_scalars(const OctreeLayout& layout, GetPage&& get_page, int target, const Vec3s& c) {
   uint64_t page_id = OctreeLayout::page_id(0, Vec3s(0));
-  const std::byte* bytes = get_page(page_id);
-  OctreeVoxel<T> out;
+  auto bytes = get_page(page_id);
+  OctreeScalars<T> out;
   if (!bytes) {
     out.missing_page = page_id;
     return out;
   }
-  OctreePage<T> page = OctreePage<T>::view({bytes, layout.page_bytes()}, layout);
+  OctreePage<T> page = detail::as_octree_page<T>(bytes, layout);
   int root = 0;        // depth of the page's root
   int level = 0;       // interior level within the page
   uint32_t index = 0;  // node index within that level
   for (int t = 0;; ++t) {
-    // The octant of the voxel's ancestor at depth t + 1 within the node at depth t (for t ==
-    // target: the voxel's slot among the node's 8).
-    const int shift = target - t;
-    const int octant = int((v.x >> shift) & 1) | int(((v.y >> shift) & 1) << 1) | int(((v.z >> shift) & 1) << 2);
     const bool cap = t == layout.cap_depth();
     const T* scalars = cap ? page.cap_scalars(index) : page.node_scalars(level, index);
-    if (t == target) return {scalars[octant], t, true, 0};
+    if (t == target) return {scalars, T{}, t, true, 0};
+    // The octant of c's ancestor at depth t + 1 within the node at depth t.
+    const int shift = target - t - 1;
+    const int octant = int((c.x >> shift) & 1) | int(((c.y >> shift) & 1) << 1) | int(((c.z >> shift) & 1) << 2);
     const OctreeNode& node = page.nodes[size_t(level)][index];
     if (!(node.child_mask & (1u << octant))) {
       // Consolidated (its region is this scalar at every level), or outside the volume.
-      return {scalars[octant], t, ((node.const_mask >> octant) & 1u) != 0, 0};
+      return {nullptr, scalars[octant], t, ((node.const_mask >> octant) & 1u) != 0, 0};
     }
     if (t + 1 == layout.cap_depth() && page.header->has_caps) {
       index = node.child_index(octant);
@@ -58,14 +78,20 @@ OctreeVoxel<T> octree_voxel(const OctreeLayout& layout, GetPage&& get_page, int 
       ++level;
       continue;
     }
-    const int shift_child = target - (t + 1) + 1;
-    const Vec3s c{v.x >> shift_child, v.y >> shift_child, v.z >> shift_child};
-    page_id = OctreeLayout::page_id(t + 1, c);
+    page_id = OctreeLayout::page_id(t + 1, {c.x >> shift, c.y >> shift, c.z >> shift});
     bytes = get_page(page_id);
-    if (!bytes) return {scalars[octant], t, false, page_id};
-    page = OctreePage<T>::view({bytes, layout.page_bytes()}, layout);
+    if (!bytes) return {nullptr, scalars[octant], t, false, page_id};
+    page = detail::as_octree_page<T>(bytes, layout);
     root = t + 1, level = 0, index = 0;
   }
+}
+
+/// @brief The voxel v of level s (0: finest), v inside layout.level_dims(s).
+template <typename T, typename GetPage>
+OctreeVoxel<T> octree_voxel(const OctreeLayout& layout, GetPage&& get_page, int s, const Vec3s& v) {
+  const OctreeScalars<T> n = octree_scalars<T>(layout, get_page, layout.level_of_depth(s), {v.x >> 1, v.y >> 1, v.z >> 1});
+  const int octant = int(v.x & 1) | int((v.y & 1) << 1) | int((v.z & 1) << 2);
+  return {n[octant], n.depth, n.exact, n.missing_page};
 }
 
 }  // namespace brickyard

@@ -114,6 +114,10 @@ void RenderSession::build_cache() {
   pages_.reset();
   const Dataset& dataset = store_->dataset();
   CacheConfig config = options_.cache ? *options_.cache : cache_config(scene_);
+  const auto& reads = entry_->info.records;
+  for (const PageKindInfo& k : store_->page_kinds())
+    if (std::find(reads.begin(), reads.end(), k.kind) == reads.end() && !config.kinds.count(k.kind))
+      config.kinds[k.kind] = KindBudget{1, k.page_bytes, k.page_bytes};
   if (dataset.has_grid()) config = share_l1_budget(config, dataset.grid().shape().bytes(), entry_->info, params_);
   pages_ = std::make_unique<PageCache>(*store_, config);
   if (dataset.has_grid()) bricks_ = std::make_unique<BrickCache>(*pages_, dataset.grid());

@@ -8,7 +8,8 @@
   X(reference)                \
   X(raymarch)                 \
   X(gobbetti)                 \
-  X(gigavoxels)
+  X(gigavoxels)                \
+  X(octree_cgt)
 
 namespace brickyard {
 

@@ -45,6 +45,10 @@ struct BackendInfo {
   std::string name;
   std::string description;
   std::vector<DataKind> kinds;
+  /// The record kinds it reads through the cache: the session gives the cache's budgets to
+  /// these, and a page of each other kind the store holds (an octree beside a grid read by a
+  /// brick back end costs one slot, not half the budget).
+  std::vector<RecordKind> records = {RecordKind::brick, RecordKind::tet_cluster};
   std::vector<RenderMode> modes;
   bool shadows = false;  ///< casts shadow rays (scenes with `shading.shadows` need it)
   /// How it can compute normals (`shading.normals`); the exact gradient of the interpolant
@@ -114,6 +118,9 @@ class RenderContext {
   const GridView& grid() const { return dataset_.grid(); }
   /// @brief The tetrahedral mesh's view (cluster table). @throws Error(unsupported) when none.
   const TetView& tets() const { return dataset_.tets(); }
+  /// @brief The octree volume beside the grid. @throws Error(unsupported) when it has none,
+  /// naming the command that builds one.
+  const OctreeView& octree() const { return dataset_.octree(); }
   /// @brief Every record kind through one cache.
   PageCache& pages() const { return *pages_; }
   /// @brief The grid's bricks in the cache. @throws Error(unsupported) when the dataset has no grid.

@@ -86,6 +86,40 @@ TEST(CliStore, ImportsProceduralFieldsDirectly) {
   EXPECT_EQ(brickyard("verify " + dir.file("s")).exit_code, 0);
 }
 
+TEST(CliStore, ImportOctreeInfoVerifyAndRenderIt) {
+  testing::TempDir dir;
+  auto r = brickyard("-q import field:sparse-blobs --size 48 --type u8 --brick-size 16 --octree --out " + dir.file("s"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "wrote the octree of")) << r.output;
+  r = brickyard("info " + dir.file("s"));
+  for (const char* part : {"octree depth 6: ", "subtrees consolidated", "of the raw grid's 108 KiB", "lossless"})
+    EXPECT_TRUE(contains(r.output, part)) << part << " missing from\n" << r.output;
+  r = brickyard("verify " + dir.file("s"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "pages decoded, 0 problems")) << r.output;
+  // The same import again: nothing to do, the octree is there.
+  r = brickyard("import field:sparse-blobs --size 48 --type u8 --brick-size 16 --octree --out " + dir.file("s"));
+  EXPECT_TRUE(contains(r.output, "nothing to do")) << r.output;
+  // Lossy and clamped rebuilds say what they did.
+  r = brickyard("-q build-octree " + dir.file("s") + " --tolerance 8 --range 10,200");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "lossy, tolerance 8, largest error")) << r.output;
+  EXPECT_TRUE(contains(r.output, "values clamped into [10, 200]")) << r.output;
+  r = brickyard("-q build-octree " + dir.file("s") + " --range 5,1");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "--range")) << r.output;
+  r = brickyard("-q build-octree " + dir.file("nothing"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_TRUE(contains(r.output, "no such store")) << r.output;
+
+  std::ofstream(dir.file("scene.json")) << R"({"dataset": "s", "backend": "octree_cgt", "image": {"width": 32, "height": 32},
+      "camera": {"eye": [1.6, -1.1, 1.4], "target": [0.5, 0.5, 0.5]}, "mode": "iso", "values": "normalized",
+      "isosurfaces": [{"value": 0.4}]})";
+  r = brickyard("-q render " + dir.file("scene.json") + " -o " + dir.file("o.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::exists(dir.file("o.png")));
+}
+
 struct BadImport {
   const char* name;
   const char* setup;  // raw file content kind

@@ -16,6 +16,7 @@
 #include "cache/trace.h"
 #include "session/grid_cache.h"
 #include "preprocess/builder.h"
+#include "preprocess/octree_builder.h"
 #include "preprocess/volume_source.h"
 #include "session/render_session.h"
 #include "render_test_util.h"
@@ -40,6 +41,7 @@ class CostsNothing : public ::testing::Test {
     o.brick_size = 8;
     auto sphere = make_field_source(make_field("sphere"), {48, 48, 48}, ValueType::f32);
     build_store(*sphere, dir_->file("sphere.store"), o);
+    build_octree(dir_->file("sphere.store"), {});  // for the back ends that read an octree volume
   }
   static void TearDownTestSuite() { delete dir_; }
 
@@ -71,7 +73,10 @@ class CostsNothing : public ::testing::Test {
 
   /// Renders frame 0, settled, with a cache that records its trace; returns the brick keys
   /// (codes) fetched at any level.
-  static std::set<uint64_t> fetched(const Scene& s, const std::string& backend, const FrameOutputs& outputs, int* covered = nullptr) {
+ public:
+  /// The records of one kind the back end's frame read (bricks unless said otherwise).
+  static std::set<uint64_t> fetched(const Scene& s, const std::string& backend, const FrameOutputs& outputs, int* covered = nullptr,
+                                    RecordKind kind = RecordKind::brick) {
     const std::string trace = dir_->file(backend + ".bytrace");
     {
       RenderSession::Options o;
@@ -85,7 +90,8 @@ class CostsNothing : public ::testing::Test {
       if (covered) *covered = covered_pixels(fb);
     }  // the cache writes its trace when destroyed
     std::set<uint64_t> keys;
-    for (const TraceRecord& r : read_trace(trace).records) keys.insert(r.key);
+    for (const TraceRecord& r : read_trace(trace).records)
+      if (r.record == kind) keys.insert(r.key);
     std::filesystem::remove(trace);
     return keys;
   }
@@ -115,6 +121,36 @@ bool may_contribute(const Store& store, const Scene& scene, const BrickKey& k, d
   return scene.value_range_visible(lo - tolerance, hi + tolerance);
 }
 const std::string kIso = R"("mode": "iso", "isosurfaces": [{"value": 0.0}])";
+
+bool reads_octree(const std::string& backend) {
+  const auto& r = backends().find(backend).info.records;
+  return std::find(r.begin(), r.end(), RecordKind::octree_page) != r.end();
+}
+
+/// For back ends that read the octree volume: every page it fetched has a range holding an
+/// isovalue, some are cap pages (full resolution), and no brick is read.
+/// `check` is `sc` with its values in the store's units, when they are not.
+void expect_octree_pages_hold_the_isovalue(const Store& s, const Scene& sc, const std::string& backend,
+                                           const Scene* check = nullptr, double tolerance = 0) {
+  if (!check) check = &sc;
+  int covered = 0;
+  const std::set<uint64_t> pages = CostsNothing::fetched(sc, backend, FrameOutputs{.depth = true, .normals = true}, &covered, RecordKind::octree_page);
+  EXPECT_GT(covered, 100);
+  ASSERT_FALSE(pages.empty());
+  EXPECT_TRUE(CostsNothing::fetched(sc, backend, {}).empty()) << "no bricks";
+  const OctreeView& view = s.dataset().octree();
+  bool any_cap_page = false;
+  for (uint64_t id : pages) {
+    const OctreePageRange* p = view.page(id);
+    ASSERT_NE(p, nullptr) << describe_octree_page(id);
+    any_cap_page |= int(BrickKey::from_code(id).level) == view.layout().cap_page_root();
+    EXPECT_TRUE(check->value_range_visible(p->min - tolerance, p->max + tolerance))
+        << describe_octree_page(id) << " [" << p->min << ", " << p->max << "]";
+  }
+  EXPECT_TRUE(any_cap_page);
+  // That pages the rays cross are skipped is octree_cgt's own test: on this sphere every page
+  // holds the isovalue.
+}
 
 // --- (a) gradients ---------------------------------------------------------------------------
 
@@ -296,6 +332,10 @@ TEST_F(CostsNothing, IsoFetchesOnlyBricksWhoseRangeHoldsTheIsovalue) {
       SCOPED_TRACE(backend + " " + shading);
       const Scene sc = scene(R"("mode": "iso", "isosurfaces": [{"value": 0.05}], "shading": {)" + std::string(shading) + "}", 64);
       if (!testing::shades_as_asked(backend, sc.shading)) continue;  // no shadow rays: refused (above)
+      if (reads_octree(backend)) {
+        expect_octree_pages_hold_the_isovalue(s, sc, backend);
+        continue;
+      }
       int covered = 0;
       const std::set<uint64_t> keys = fetched(sc, backend, FrameOutputs{.depth = true, .normals = true}, &covered);
       EXPECT_GT(covered, 100);
@@ -323,6 +363,12 @@ TEST_F(CostsNothing, NormalizedIsovaluesAreMappedBeforeBricksAreChosen) {
   const Scene sc = scene(R"("values": "normalized", "mode": "iso", "isosurfaces": [{"value": )" + std::to_string(fraction) + "}]", 64);
   for (const std::string& backend : backends_for(RenderMode::iso)) {
     SCOPED_TRACE(backend);
+    if (reads_octree(backend)) {
+      Scene in_store_units = sc;
+      normalize_values(in_store_units, lo, hi);
+      expect_octree_pages_hold_the_isovalue(s, sc, backend, &in_store_units, 1e-6);
+      continue;
+    }
     int covered = 0;
     const std::set<uint64_t> keys = fetched(sc, backend, {}, &covered);
     EXPECT_GT(covered, 100);

@@ -9,6 +9,7 @@
 #include <cstring>
 
 #include "preprocess/builder.h"
+#include "preprocess/octree_builder.h"
 #include "preprocess/volume_source.h"
 #include "render_test_util.h"
 #include "shared_suite.h"
@@ -28,6 +29,9 @@ class SharedSuites : public ::testing::Test {
     o.brick_size = 8;
     build_store(*make_field_source(make_field("sphere"), {40, 40, 40}, ValueType::f32), dir_->file("sphere.store"), o);
     build_store(*make_field_source(make_field("fbm"), {40, 36, 33}, ValueType::u16), dir_->file("fbm.store"), o);
+    // The back ends that read an octree volume (octree_cgt) need one beside the bricks.
+    build_octree(dir_->file("sphere.store"), {});
+    build_octree(dir_->file("fbm.store"), {});
   }
   static void TearDownTestSuite() { delete dir_; }
 

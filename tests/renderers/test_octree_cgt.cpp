@@ -1,0 +1,165 @@
+// octree_cgt: the octree volume's isosurfaces against the reference (both solve each cell's
+// trilinear cubic), the pages it reads (only those whose range holds an isovalue), a cache far
+// smaller than the octree, and the refusal of a grid without an octree.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <set>
+
+#include "cache/trace.h"
+#include "preprocess/builder.h"
+#include "preprocess/octree_builder.h"
+#include "preprocess/volume_source.h"
+#include "render_test_util.h"
+#include "shared_suite.h"
+#include "storage/store.h"
+#include "test_util.h"
+
+namespace brickyard {
+namespace {
+
+class OctreeCgt : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    BuildOptions o;
+    o.brick_size = 8;
+    auto make = [&](const char* name, const char* field, const Vec3s& dims, ValueType t, bool octree = true) {
+      build_store(*make_field_source(make_field(field), dims, t), dir_->file(name), o);
+      if (octree) build_octree(dir_->file(name), {});
+    };
+    make("ml.store", "marschner-lobb", {41, 38, 35}, ValueType::f32);
+    make("fbm.store", "fbm", {34, 30, 37}, ValueType::u16);
+    make("sphere.store", "sphere", {96, 96, 96}, ValueType::f32);
+    make("grid-only.store", "sphere", {20, 20, 20}, ValueType::f32, false);
+  }
+  static void TearDownTestSuite() { delete dir_; }
+
+  static Scene scene(const std::string& store, const std::string& what, int size = 64, const std::string& cache = "") {
+    const std::string text = R"({"dataset": ")" + dir_->file(store) + R"(", "backend": "octree_cgt", "image": {"width": )" +
+                             std::to_string(size) + R"(, "height": )" + std::to_string(size) + R"(},)" + cache + R"(
+        "camera": {"eye": [1.7, -1.0, 1.4], "target": [0.5, 0.5, 0.45], "fov_degrees": 40}, )" + what + "}";
+    return parse_scene(text, dir_->file("scene.json"));
+  }
+  static testing::TempDir* dir_;
+};
+testing::TempDir* OctreeCgt::dir_ = nullptr;
+
+FrameBuffers render(const Scene& s, FrameStats* stats = nullptr) {
+  RenderSession session(s);
+  FrameBuffers fb;
+  const FrameStats st = session.render(0, fb, {.depth = true, .normals = true});
+  if (stats) *stats = st;
+  return fb;
+}
+
+TEST_F(OctreeCgt, HitsWhereTheReferenceDoesToATenThousandthOfAVoxel) {
+  struct Case {
+    const char* store;
+    std::string what;
+  };
+  for (const Case& c : {Case{"ml.store", R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})"},
+                        Case{"fbm.store", R"("mode": "iso", "values": "normalized", "isosurfaces": [{"value": 0.45, "color": [1, 0, 0]},
+                             {"value": 0.6, "color": [0, 1, 0]}], "shading": {"light": "headlight"})"},
+                        Case{"sphere.store", R"("mode": "iso", "isosurfaces": [{"value": 0.0}], "shading": {"light": "none"})"}}) {
+    SCOPED_TRACE(c.store);
+    const Scene s = scene(c.store, c.what);
+    const FrameBuffers fb = render(s);
+    const FrameBuffers truth = testing::reference_frame(s);
+    int hits = 0, mismatched = 0;
+    double worst = 0, worst_normal = 0;
+    for (int y = 0; y < fb.height(); ++y)
+      for (int x = 0; x < fb.width(); ++x) {
+        const bool a = std::isfinite(fb.depth(x, y)), b = std::isfinite(truth.depth(x, y));
+        if (a != b) {
+          ++mismatched;
+          continue;
+        }
+        if (!a) continue;
+        ++hits;
+        worst = std::max(worst, std::abs(double(fb.depth(x, y)) - double(truth.depth(x, y))));
+        worst_normal = std::max(worst_normal, double(length(fb.normal(x, y) - truth.normal(x, y))));
+      }
+    EXPECT_GT(hits, 300);
+    EXPECT_EQ(mismatched, 0);
+    const double voxel = RenderSession(s).context().geometry().voxel_size;
+    EXPECT_LT(worst / voxel, 1e-4) << "voxels";
+    EXPECT_LT(worst_normal, 1e-3);
+  }
+}
+
+TEST_F(OctreeCgt, ReadsOnlyPagesWhoseRangeHoldsTheIsovalueAndSkipsTheOthersItsRaysCross) {
+  // The sphere's surface: pages well inside it and near the volume's corners miss it.
+  Scene s = scene("sphere.store", R"("mode": "iso", "isosurfaces": [{"value": 0.0}])");
+  const std::string trace = dir_->file("sphere.bytrace");
+  {
+    RenderSession::Options o;
+    CacheConfig c = cache_config(s);
+    c.trace_path = trace;
+    o.cache = c;
+    RenderSession session(s, o);
+    FrameBuffers fb;
+    session.render(0, fb, {});
+  }
+  std::set<uint64_t> fetched;
+  for (const TraceRecord& r : read_trace(trace).records) {
+    EXPECT_EQ(r.record, RecordKind::octree_page);
+    fetched.insert(r.key);
+  }
+  Store store(dir_->file("sphere.store"));
+  const OctreeView& view = store.dataset().octree();
+  Scene in_store_units = s;
+  normalize_values(in_store_units, store.manifest().min_value, store.manifest().max_value);
+  // A page is read when its range holds the isovalue, or when it is a forward neighbour of
+  // one that does: its first voxels close that page's last cells (pages carry no apron).
+  auto holds = [&](const OctreePageRange* p) { return p && in_store_units.value_range_visible(p->min, p->max); };
+  int holding = 0, not_holding = 0, skipped = 0;
+  for (const OctreePageRange& p : view.pages()) {
+    const BrickKey k = BrickKey::from_code(p.id);
+    bool behind = false;
+    for (int o = 1; o < 8; ++o)
+      if ((!(o & 1) || k.x > 0) && (!(o & 2) || k.y > 0) && (!(o & 4) || k.z > 0))
+        behind |= holds(view.page(OctreeLayout::page_id(int(k.level), {int64_t(k.x) - (o & 1), int64_t(k.y) - ((o >> 1) & 1),
+                                                                       int64_t(k.z) - ((o >> 2) & 1)})));
+    (holds(&p) ? holding : not_holding)++;
+    if (!holds(&p) && !behind) {
+      EXPECT_FALSE(fetched.count(p.id)) << describe_octree_page(p.id);
+      ++skipped;
+    }
+  }
+  EXPECT_GT(skipped, 0);
+  EXPECT_GT(holding, 5);
+  EXPECT_GT(not_holding, 5) << "pages without the surface, which rays through the volume cross";
+  EXPECT_GT(fetched.size(), 5u);
+}
+
+TEST_F(OctreeCgt, AnL1FarBelowTheOctreeGivesTheSameImage) {
+  const std::string what = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})";
+  Store store(dir_->file("ml.store"));
+  const uint64_t page = store.manifest().octree->page_bytes;
+  ASSERT_GT(store.manifest().octree->pages, 20u);
+  const FrameBuffers roomy = render(scene("ml.store", what, 64, R"("cache": {"l1": "64MiB", "l2": "64MiB"},)"));
+  // Four pages of L1 and of L2 for an octree of dozens: tiles re-read what they need.
+  const std::string tight = R"("cache": {"l1": ")" + std::to_string(4 * page) + R"(", "l2": ")" + std::to_string(4 * page) + R"("},)";
+  FrameStats stats;
+  const FrameBuffers small = render(scene("ml.store", what, 64, tight), &stats);
+  EXPECT_EQ(std::memcmp(roomy.color.data(), small.color.data(), roomy.color.size() * sizeof(Rgbaf)), 0);
+  EXPECT_EQ(std::memcmp(roomy.depth.data(), small.depth.data(), roomy.depth.size() * sizeof(float)), 0);
+}
+
+TEST_F(OctreeCgt, AGridWithoutAnOctreeIsRefusedBeforeTheFirstFrameNamingTheCommand) {
+  const Scene s = scene("grid-only.store", R"("mode": "iso", "isosurfaces": [{"value": 0.0}])");
+  try {
+    RenderSession session(s);
+    FAIL() << "a grid without an octree was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::unsupported);
+    EXPECT_NE(std::string(e.what()).find("brickyard build-octree"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("grid-only.store"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace brickyard
