@@ -65,6 +65,21 @@ TEST(Cli, FieldParametersAndThreads) {
   EXPECT_TRUE(seed);
 }
 
+TEST(Cli, GenerateWaveletIsVtksDefaultWaveletBitForBit) {
+  // VTK's untouched vtkRTAnalyticSource is 21^3 (WholeExtent -10..10); see docs/fields.md.
+  testing::TempDir dir;
+  auto r = brickyard("-q generate wavelet --size 21 --type f32 --out " + dir.file("w.raw"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(testing::read_file(dir.file("w.raw")) ==
+              testing::read_file(std::string(BRICKYARD_SOURCE_DIR) + "/tests/data/wavelet/default_21x21x21.f32"));
+  const RawVolumeInfo info = read_raw_sidecar(dir.file("w.raw.json"));
+  EXPECT_NEAR(info.min_value, 37.3531, 1e-4);  // VTK's GetScalarRange() of the default source
+  EXPECT_NEAR(info.max_value, 276.829, 1e-3);
+  auto u8 = brickyard("-q generate wavelet --size 16,8,4 --type u8 --set xfreq=20 --out " + dir.file("w8.raw"));
+  ASSERT_EQ(u8.exit_code, 0) << u8.output;
+  EXPECT_EQ(std::filesystem::file_size(dir.file("w8.raw")), 16u * 8 * 4);
+}
+
 struct BadArgs {
   const char* name;
   const char* args;
