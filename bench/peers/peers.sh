@@ -1,0 +1,201 @@
+#!/usr/bin/env bash
+# bench/peers: brickyard's isosurface next to the classic pipeline, on the same voxels, isovalue,
+# camera and resolution, in one run: VTK's vtkFlyingEdges3D extracts the surface, Embree 3
+# builds its BVH over the triangles and renders primary-ray frames, and a brickyard back end
+# renders a store of the same volume. Prints each step's time and the two ratios the project's
+# targets are about; writes the figures to --out. docs/peers.md says what is measured and how.
+#
+# Installs what it needs from Debian (python3-vtk9, python3-numpy, libembree-dev, g++) and
+# compiles embree_frame.cpp into build-peers/; nothing in the library links VTK or Embree.
+set -euo pipefail
+
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/../.." && pwd)"
+
+usage() {
+  cat <<EOF
+usage: bench/peers/peers.sh [options]
+
+  --backend NAME     brickyard back end (default octree_cgt; raymarch, gobbetti, ...)
+  --field NAME       procedural field for 'brickyard generate' (default wavelet)
+  --size N           N^3 voxels (default 256)
+  --iso VALUE        isovalue, in the field's units (default 160)
+  --width W          image width (default 512)
+  --height H         image height (default 512)
+  --frames N         frames per side: the first, then N-1 steady ones (default 8, at least 2)
+  --threads N        threads for VTK, Embree and brickyard alike (default 2)
+  --eye X,Y,Z        camera, in coordinates normalised to the volume's box
+  --target X,Y,Z       (defaults: scenes/default-iso.json's camera:
+  --up X,Y,Z            eye 1.6,-1.1,1.4, target 0.5,0.5,0.45, up 0,0,1, fov 35)
+  --fov DEG          vertical field of view
+  --set NAME=VALUE   a parameter of the brickyard back end (repeatable)
+  --vtk-smp NAME     VTK SMP back end (Sequential, STDThread, TBB; default: VTK's own)
+  --embree-quality Q Embree BVH build quality: low, medium (Embree's default) or high
+  --max-mismatch F   the camera check fails above this fraction of pixels (default 0.01)
+  --brickyard PATH   the brickyard executable (default build/bin/brickyard)
+  --out DIR          output folder (default out/peers)
+  -h, --help         this text
+
+Exit status: 0 on success, 2 for a bad argument, 3 when the camera check fails, 1 otherwise.
+EOF
+}
+
+die() {  # usage error
+  echo "peers: $*" >&2
+  echo "peers: run with --help for the options" >&2
+  exit 2
+}
+
+fail() {
+  echo "peers: $*" >&2
+  exit 1
+}
+
+is_int() { [[ "$1" =~ ^[0-9]+$ ]]; }
+is_number() { [[ "$1" =~ ^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$ ]]; }
+is_vec3() {
+  local IFS=, parts
+  read -r -a parts <<<"$1"
+  [ "${#parts[@]}" -eq 3 ] && is_number "${parts[0]}" && is_number "${parts[1]}" && is_number "${parts[2]}" &&
+    [[ "$1" != *, ]]
+}
+
+backend=octree_cgt field=wavelet size=256 iso=160 width=512 height=512 frames=8 threads=2
+eye=1.6,-1.1,1.4 target=0.5,0.5,0.45 up=0,0,1 fov=35
+sets=() vtk_smp="" embree_quality=medium max_mismatch=0.01 brickyard="$root/build/bin/brickyard" out="out/peers"
+
+while [ $# -gt 0 ]; do
+  opt="$1"
+  case "$opt" in
+    -h | --help) usage; exit 0 ;;
+    --backend | --field | --size | --iso | --width | --height | --frames | --threads | --eye | --target | --up | \
+      --fov | --set | --vtk-smp | --embree-quality | --max-mismatch | --brickyard | --out)
+      [ $# -ge 2 ] || die "$opt needs a value"
+      val="$2"
+      shift 2
+      ;;
+    --*=*) die "write '${opt%%=*} ${opt#*=}', not '$opt'" ;;
+    *) die "unknown argument '$opt'" ;;
+  esac
+  case "$opt" in
+    --backend) [[ "$val" =~ ^[A-Za-z0-9_.-]+$ ]] || die "--backend: '$val' is not a back-end name"; backend="$val" ;;
+    --field) [[ "$val" =~ ^[A-Za-z0-9_.-]+$ ]] || die "--field: '$val' is not a field name"; field="$val" ;;
+    --size) { is_int "$val" && [ "$val" -ge 2 ] && [ "$val" -le 2048 ]; } || die "--size: '$val' is not an integer in [2, 2048]"; size="$val" ;;
+    --iso) is_number "$val" || die "--iso: '$val' is not a number"; iso="$val" ;;
+    --width) { is_int "$val" && [ "$val" -ge 1 ] && [ "$val" -le 16384 ]; } || die "--width: '$val' is not an integer in [1, 16384]"; width="$val" ;;
+    --height) { is_int "$val" && [ "$val" -ge 1 ] && [ "$val" -le 16384 ]; } || die "--height: '$val' is not an integer in [1, 16384]"; height="$val" ;;
+    --frames) { is_int "$val" && [ "$val" -ge 2 ] && [ "$val" -le 1000 ]; } || die "--frames: '$val' is not an integer in [2, 1000]"; frames="$val" ;;
+    --threads) { is_int "$val" && [ "$val" -ge 1 ] && [ "$val" -le 1024 ]; } || die "--threads: '$val' is not an integer in [1, 1024]"; threads="$val" ;;
+    --eye) is_vec3 "$val" || die "--eye: '$val' is not X,Y,Z"; eye="$val" ;;
+    --target) is_vec3 "$val" || die "--target: '$val' is not X,Y,Z"; target="$val" ;;
+    --up) is_vec3 "$val" || die "--up: '$val' is not X,Y,Z"; up="$val" ;;
+    --fov) is_number "$val" || die "--fov: '$val' is not a number"; fov="$val" ;;
+    --set) [[ "$val" =~ ^[A-Za-z0-9_]+=.+$ ]] || die "--set: '$val' is not NAME=VALUE"; sets+=(--set "$val") ;;
+    --vtk-smp) case "$val" in Sequential | STDThread | TBB | OpenMP) vtk_smp="$val" ;; *) die "--vtk-smp: '$val' is not Sequential, STDThread, TBB or OpenMP" ;; esac ;;
+    --embree-quality) case "$val" in low | medium | high) embree_quality="$val" ;; *) die "--embree-quality: '$val' is not low, medium or high" ;; esac ;;
+    --max-mismatch) is_number "$val" || die "--max-mismatch: '$val' is not a number"; max_mismatch="$val" ;;
+    --brickyard) brickyard="$val" ;;
+    --out) [ -n "$val" ] || die "--out: an empty path"; out="$val" ;;
+  esac
+done
+
+# --- brickyard: built, and it knows the back end and the field ----------------------------
+
+[ -x "$brickyard" ] || fail "$brickyard: no brickyard executable; build it first (cmake --preset release && cmake --build --preset release), or name one with --brickyard"
+by=("$brickyard" -q -j "$threads")
+known_backends="$("$brickyard" render --list-backends | awk '/^[^ ]/ {print $1}')"
+if ! grep -qx -- "$backend" <<<"$known_backends"; then
+  hint=""
+  [ "$backend" = octree_cgt ] && hint="; octree_cgt, the default, is not in this build yet: pass --backend raymarch or gobbetti"
+  die "--backend: this brickyard has no back end '$backend' (it has: $(echo $known_backends | tr ' ' ','))$hint"
+fi
+known_fields="$("$brickyard" generate --list | awk '/^[^ ]/ {print $1}')"
+if ! grep -qx -- "$field" <<<"$known_fields"; then
+  hint=""
+  [ "$field" = wavelet ] && hint="; wavelet, the default, is not in this build yet: pass --field marschner-lobb --iso 0.5, or fbm"
+  die "--field: this brickyard has no field '$field' (it has: $(echo $known_fields | tr ' ' ','))$hint"
+fi
+
+# --- Debian packages ------------------------------------------------------------------------
+
+py=/usr/bin/python3  # Debian's: python3-vtk9 and python3-numpy are built for it, not for another python3 on PATH
+need=()
+for p in python3 python3-vtk9 python3-numpy libembree-dev g++ pkg-config; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || need+=("$p")
+done
+if [ ${#need[@]} -gt 0 ]; then
+  if [ "$(id -u)" -eq 0 ]; then sudo=(); elif command -v sudo >/dev/null; then sudo=(sudo); else
+    fail "missing Debian packages: ${need[*]}; not root and no sudo: apt-get install ${need[*]}"
+  fi
+  echo "peers: installing ${need[*]}" >&2
+  export DEBIAN_FRONTEND=noninteractive
+  apt_install=("${sudo[@]}" apt-get install -y -qq --no-install-recommends -o DPkg::Lock::Timeout=600)
+  "${apt_install[@]}" "${need[@]}" >/dev/null ||
+    { "${sudo[@]}" apt-get update -qq -o DPkg::Lock::Timeout=600 && "${apt_install[@]}" "${need[@]}" >/dev/null; } ||
+    fail "apt-get could not install ${need[*]}"
+fi
+
+# --- embree_frame, in a build folder of its own ----------------------------------------------
+
+bin_dir="$root/build-peers"
+exe="$bin_dir/embree_frame"
+if pkg-config --exists embree3 2>/dev/null; then
+  embree_flags=($(pkg-config --cflags --libs embree3))
+  embree_how="pkg-config embree3"
+else
+  # Debian's libembree-dev ships CMake files but no embree3.pc: headers and library by path.
+  [ -f /usr/include/embree3/rtcore.h ] || fail "no embree3 headers (/usr/include/embree3/rtcore.h) and no pkg-config embree3"
+  embree_flags=(-lembree3)
+  embree_how="-lembree3 (libembree-dev has no embree3.pc)"
+fi
+if [ ! -x "$exe" ] || [ "$here/embree_frame.cpp" -nt "$exe" ]; then
+  mkdir -p "$bin_dir"
+  echo "peers: compiling $exe (g++ -O3, Embree by $embree_how)" >&2
+  g++ -std=c++17 -O3 -Wall -Wextra -o "$exe.partial" "$here/embree_frame.cpp" "${embree_flags[@]}" -pthread
+  mv "$exe.partial" "$exe"
+fi
+
+# --- data: one raw file, one store of it ------------------------------------------------------
+
+mkdir -p "$out"
+out="$(cd "$out" && pwd)"
+data="$out/data"
+raw="$data/$field-$size.raw"
+store="$data/$field-$size.store"
+mkdir -p "$data"
+rm -rf "$out/frames" "$out/results.json" "$out/results.csv"
+echo "peers: generating $field ${size}^3 f32 and its store in $data" >&2
+"${by[@]}" generate "$field" --size "$size" --type f32 --out "$raw" >/dev/null
+"${by[@]}" import "$raw" --out "$store" >/dev/null
+
+cam=(--eye "$eye" --target "$target" --up "$up" --fov "$fov")
+"$py" "$here/peers.py" scene --store "$store" --backend "$backend" --iso "$iso" --width "$width" --height "$height" \
+  --frames "$frames" --out "$out/scene.json" "${cam[@]}"
+
+# --- 1. VTK flying edges ------------------------------------------------------------------------
+
+vtk_args=()
+[ -n "$vtk_smp" ] && vtk_args=(--smp-backend "$vtk_smp")
+"$py" "$here/peers.py" vtk --raw "$raw" --iso "$iso" --threads "$threads" "${vtk_args[@]}" \
+  --mesh "$out/surface.bymesh" --json "$out/vtk.json"
+
+# --- 2. Embree: BVH build and frames over those triangles ---------------------------------------
+
+box="$("$py" -c 'import json,sys; s=json.load(open(sys.argv[1])); o=s["origin"]; h=[o[a]+s["spacing"][a]*(s["dims"][a]-1) for a in range(3)]; print(",".join(repr(float(v)) for v in o+h))' "$raw.json")"
+"$exe" --mesh "$out/surface.bymesh" --box "$box" "${cam[@]}" --width "$width" --height "$height" \
+  --threads "$threads" --frames "$frames" --quality "$embree_quality" --depth "$out/embree-depth.f32" --json "$out/embree.json" >/dev/null
+echo "peers: embree: $("$py" -c 'import json,sys; e=json.load(open(sys.argv[1])); print("build %.2f ms, first frame %.2f ms, steady %.2f ms" % (e["build_ms"], e["first_frame_ms"], e["steady_frame_ms"]))' "$out/embree.json")" >&2
+
+# --- 3. brickyard ---------------------------------------------------------------------------------
+
+echo "peers: brickyard $backend: $frames frames of one camera" >&2
+t0=$(date +%s%N)
+"${by[@]}" render "$out/scene.json" --backend "$backend" "${sets[@]}" --frames all \
+  -o "$out/frames/colour.png" --depth "$out/frames/depth.png" --stats "$out/brickyard-stats.json" >"$out/brickyard.log"
+t1=$(date +%s%N)
+
+# --- the table -------------------------------------------------------------------------------------
+
+"$py" "$here/peers.py" report --dir "$out" --raw "$raw" --store "$store" --field "$field" --iso "$iso" \
+  --width "$width" --height "$height" --threads "$threads" --by-wall-ms "$(( (t1 - t0) / 1000 ))e-3" \
+  --max-mismatch "$max_mismatch" "${cam[@]}"

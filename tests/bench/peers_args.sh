@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# bench/peers/peers.sh refuses bad arguments with exit status 2 and a message naming the
+# option, before it installs, compiles or generates anything; --help exits 0. Needs neither
+# VTK nor Embree: every case here stops at argument checking.
+#   peers_args.sh SOURCE_DIR BRICKYARD_EXE
+set -uo pipefail
+peers="$1/bench/peers/peers.sh" by="$2"
+failures=0
+
+expect() {  # expect STATUS PATTERN ARGS...
+  local status=$1 pattern=$2
+  shift 2
+  local out rc
+  out=$("$peers" "$@" 2>&1)
+  rc=$?
+  if [ "$rc" -ne "$status" ] || ! grep -q -- "$pattern" <<<"$out"; then
+    echo "FAIL: peers.sh $*: exit $rc (expected $status), output:"
+    echo "$out" | sed 's/^/    /'
+    failures=$((failures + 1))
+  else
+    echo "ok: peers.sh $* -> $rc: $(head -1 <<<"$out")"
+  fi
+}
+
+expect 0 "usage: bench/peers/peers.sh" --help
+expect 2 "--size: 'abc' is not an integer" --size abc
+expect 2 "--size needs a value" --size
+expect 2 "unknown argument '--bogus'" --bogus
+expect 2 "write '--iso 0.5', not '--iso=0.5'" --iso=0.5
+expect 2 "--eye: '1,2' is not X,Y,Z" --eye 1,2
+expect 2 "--frames: '1' is not an integer in \[2, 1000\]" --frames 1
+expect 2 "--embree-quality: 'best' is not low, medium or high" --embree-quality best
+expect 2 "no back end 'no-such-backend' (it has: .*raymarch" --brickyard "$by" --backend no-such-backend
+expect 2 "no field 'no-such-field' (it has: .*marschner-lobb" --brickyard "$by" --backend raymarch --field no-such-field
+expect 1 "no brickyard executable" --brickyard /nonexistent/brickyard --backend raymarch
+
+[ "$failures" -eq 0 ] && echo "all cases passed" || { echo "$failures case(s) failed"; exit 1; }
