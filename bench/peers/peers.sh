@@ -105,15 +105,11 @@ done
 by=("$brickyard" -q -j "$threads")
 known_backends="$("$brickyard" render --list-backends | awk '/^[^ ]/ {print $1}')"
 if ! grep -qx -- "$backend" <<<"$known_backends"; then
-  hint=""
-  [ "$backend" = octree_cgt ] && hint="; octree_cgt, the default, is not in this build yet: pass --backend raymarch or gobbetti"
-  die "--backend: this brickyard has no back end '$backend' (it has: $(echo $known_backends | tr ' ' ','))$hint"
+  die "--backend: this brickyard has no back end '$backend' (it has: $(echo $known_backends | tr ' ' ','))"
 fi
 known_fields="$("$brickyard" generate --list | awk '/^[^ ]/ {print $1}')"
 if ! grep -qx -- "$field" <<<"$known_fields"; then
-  hint=""
-  [ "$field" = wavelet ] && hint="; wavelet, the default, is not in this build yet: pass --field marschner-lobb --iso 0.5, or fbm"
-  die "--field: this brickyard has no field '$field' (it has: $(echo $known_fields | tr ' ' ','))$hint"
+  die "--field: this brickyard has no field '$field' (it has: $(echo $known_fields | tr ' ' ','))"
 fi
 
 # --- Debian packages ------------------------------------------------------------------------
@@ -166,7 +162,10 @@ mkdir -p "$data"
 rm -rf "$out/frames" "$out/results.json" "$out/results.csv"
 echo "peers: generating $field ${size}^3 f32 and its store in $data" >&2
 "${by[@]}" generate "$field" --size "$size" --type f32 --out "$raw" >/dev/null
-"${by[@]}" import "$raw" --out "$store" >/dev/null
+# octree_cgt reads the grid's octree volume: built once, like the bricks, whatever the isovalue.
+import_args=()
+[ "$backend" = octree_cgt ] && import_args=(--octree)
+"${by[@]}" import "$raw" --out "$store" "${import_args[@]}" >/dev/null
 
 cam=(--eye "$eye" --target "$target" --up "$up" --fov "$fov")
 "$py" "$here/peers.py" scene --store "$store" --backend "$backend" --iso "$iso" --width "$width" --height "$height" \
