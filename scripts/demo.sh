@@ -14,7 +14,7 @@ mkdir -p "$out"
 
 "$by" version
 "$by" generate marschner-lobb --size 256 --type f32 --out "$out/default.raw"
-"$by" import "$out/default.raw" --out "$out/default.store"
+"$by" import "$out/default.raw" --out "$out/default.store" --octree
 "$by" verify "$out/default.store"
 "$by" info "$out/default.store"
 "$by" flight "$out/default.store" --path scenes/flight-orbit.json --l1 16MiB --l2 32MiB \
@@ -27,7 +27,7 @@ echo
 echo "outputs in $out/:"
 echo "  default.raw         the default dataset, 256^3 f32 voxels (x fastest, little-endian)"
 echo "  default.raw.json    its sidecar: dims, type, spacing, origin, value range, XXH3-64 checksum"
-echo "  default.store/      its brick store (LMDB): brickyard info|verify|export $out/default.store"
+echo "  default.store/      its brick store (LMDB) and octree volume: brickyard info|verify|export $out/default.store"
 echo "  flight.bytrace      every cache access of a 120-frame camera flight (scenes/flight-orbit.json)"
 echo "  cache-stats.json    the cache's statistics after the flight"
 echo "  miss-ratio.png      miss ratio against cache size for every policy and OPT (data: miss-ratio.png.csv)"

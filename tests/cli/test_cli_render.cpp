@@ -225,6 +225,20 @@ TEST_F(CliRender, BenchWritesTableReportImagesAndCharts) {
   }
 }
 
+TEST_F(CliRender, BenchOfEveryBackEndSkipsOneWhoseDataTheStoreLacksAndSaysHowToAddIt) {
+  testing::TempDir out;
+  const std::string scene = write_scene("bench.json", R"("image": {"width": 32, "height": 32}, )" + kCamera + ", " + kIso);
+  const auto r = brickyard("-q bench " + scene + " --warm 1 --cold 0 --quality step=1 --quality lod_ratio=1 --out " + out.file("all"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("octree_cgt reads the octree volume"));
+  EXPECT_THAT(r.output, HasSubstr("skipped (brickyard build-octree "));
+  EXPECT_THAT(testing::read_file(out.file("all") + "/bench.csv"), HasSubstr("\ngobbetti,"));
+  // Named explicitly, it is refused as a render would be: the user asked for it.
+  const auto named = brickyard("-q bench " + scene + " --backends octree_cgt --warm 1 --cold 0 --out " + out.file("named"));
+  EXPECT_NE(named.exit_code, 0) << named.output;
+  EXPECT_THAT(named.output, HasSubstr("build-octree"));
+}
+
 TEST_F(CliRender, BenchAgainstASupersampledReferenceFiltersColourAndKeepsCentreDepths) {
   testing::TempDir out;
   const std::string scene = write_scene("bench_ss.json", R"("image": {"width": 24, "height": 24}, )" + kCamera + ", " + kIso);
