@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "dataset/octree_walk.h"
+#include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
 #include "renderers/common/params.h"
 #include "renderers/common/pixel.h"
@@ -380,21 +381,9 @@ class OctreeCgtRenderer final : public Renderer {
         if (t >= best.t) continue;
         best.t = t, best.surface = int(i), found = true;
         const Vec3d u{u0[0] + du[0] * *root, u0[1] + du[1] * *root, u0[2] + du[2] * *root};
-        best.normal_voxel = trilinear_gradient(c, u);
+        best.normal_voxel = trilinear_gradient(c, u.x, u.y, u.z);
       }
       return found;
-    }
-
-    static Vec3d trilinear_gradient(const double c[8], const Vec3d& u) {
-      Vec3d g(0.0);
-      for (int k = 0; k < 8; ++k) {
-        const double wx = (k & 1) ? u.x : 1 - u.x, wy = (k & 2) ? u.y : 1 - u.y, wz = (k & 4) ? u.z : 1 - u.z;
-        const double sx = (k & 1) ? 1 : -1, sy = (k & 2) ? 1 : -1, sz = (k & 4) ? 1 : -1;
-        g.x += c[k] * sx * wy * wz;
-        g.y += c[k] * wx * sy * wz;
-        g.z += c[k] * wx * wy * sz;
-      }
-      return g;
     }
   };
 
