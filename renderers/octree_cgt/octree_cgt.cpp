@@ -17,6 +17,9 @@
 #include <memory>
 #include <vector>
 
+#include <fmt/format.h>
+
+#include "core/error.h"
 #include "dataset/octree_walk.h"
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
@@ -29,12 +32,15 @@ namespace brickyard {
 namespace {
 
 struct OctreeCgtParams {
+  int packet{};             // rays per side of a packet; 1: the single-ray mode
   int pinned_pages{};       // pages a tile keeps pinned before it lets them go
   double root_tolerance{};  // relative |g| at an extremum of the cell's cubic that counts as a touching root
 };
 
 const ParamTable<OctreeCgtParams>& octree_cgt_params() {
   static const ParamTable<OctreeCgtParams> table{
+      {"packet", &OctreeCgtParams::packet, 8, 1, 16,
+       "packets of packet x packet rays traverse the octree together (2, 4, 8 or 16); 1: single-ray mode"},
       {"pinned_pages", &OctreeCgtParams::pinned_pages, 64, 4, 4096,
        "octree pages one tile keeps pinned in the cache's L1 while it renders (then released, and fetched again)"},
       {"root_tolerance", &OctreeCgtParams::root_tolerance, 1e-12, 0.0, 1e-3,
@@ -96,8 +102,18 @@ class OctreeCgtRenderer final : public Renderer {
 
   void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
     Tracer t(*this, setup, counters);
+    if (p_.packet > 1) return t.render_packets(tile, p_.packet, out);
     for (int y = tile.y0; y < tile.y1; ++y)
       for (int x = tile.x0; x < tile.x1; ++x) t.pixel(x, y, out);
+  }
+
+  void begin_frame(const FrameSetup& setup) override {
+    // The major axis K, once per frame: the camera's forward direction's largest component in
+    // voxel coordinates (packets whose rays disagree with it along K go ray by ray).
+    Vec3d f, right, up;
+    setup.camera.basis(f, right, up);
+    const Vec3d fv = f / geo_.spacing;
+    major_axis_ = std::abs(fv.x) >= std::abs(fv.y) && std::abs(fv.x) >= std::abs(fv.z) ? 0 : std::abs(fv.y) >= std::abs(fv.z) ? 1 : 2;
   }
 
  private:
@@ -348,24 +364,42 @@ class OctreeCgtRenderer final : public Renderer {
       return double(cap_at({v.x >> 1, v.y >> 1, v.z >> 1})[octant]);
     }
 
-    /// Intersects one cell; true when it holds a hit.
-    bool cell(const Vec3s& cell, const Node& n, const T* cap, const Vec3d& o, const Vec3d& d, Interval<double> s,
-              Hit& best) {
-      double c[8];
-      double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
+    /// A cell's 8 corners (index dx + 2 dy + 4 dz) and their range.
+    void cell_corners(const Vec3s& cell, const Node& n, const T* cap, double c[8], double& lo, double& hi) {
+      lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
       for (int k = 0; k < 8; ++k) {
         c[k] = corner({cell.x + (k & 1), cell.y + ((k >> 1) & 1), cell.z + ((k >> 2) & 1)}, n, cap);
         lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
       }
+    }
+
+    bool crosses_corners(double lo, double hi) const {
+      for (double iso : r.iso_)
+        if (iso >= lo && iso <= hi) return true;
+      return false;
+    }
+
+    /// Intersects one cell; true when it holds a hit.
+    bool cell(const Vec3s& cell, const Node& n, const T* cap, const Vec3d& o, const Vec3d& d, Interval<double> s,
+              Hit& best) {
+      double c[8], lo, hi;
+      cell_corners(cell, n, cap, c, lo, hi);
+      const Vec3d inv{1.0 / d.x, 1.0 / d.y, 1.0 / d.z};
+      return intersect(cell, c, lo, hi, o, d, inv, s, best);
+    }
+
+    /// One ray against one cell of corners c: the first root of each isosurface's cubic.
+    bool intersect(const Vec3s& cell, const double c[8], double lo, double hi, const Vec3d& o, const Vec3d& d,
+                   const Vec3d& inv, Interval<double> s, Hit& best) {
       Interval<double> cs = s;
       for (int a = 0; a < 3; ++a) {
-        double t0 = (double(cell[a]) - o[a]) / d[a], t1 = (double(cell[a] + 1) - o[a]) / d[a];
+        double t0 = (double(cell[a]) - o[a]) * inv[a], t1 = (double(cell[a] + 1) - o[a]) * inv[a];
         if (t0 > t1) std::swap(t0, t1);
         if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();
         if (std::isnan(t1)) t1 = std::numeric_limits<double>::infinity();
         cs.t0 = std::max(cs.t0, t0), cs.t1 = std::min(cs.t1, t1);
       }
-      if (cs.t0 > cs.t1) return false;
+      if (cs.t0 > cs.t1 || cs.t0 >= best.t) return false;
       ++counters.cells;
       bool found = false;
       for (size_t i = 0; i < r.iso_.size(); ++i) {
@@ -385,6 +419,214 @@ class OctreeCgtRenderer final : public Renderer {
       }
       return found;
     }
+
+    // --- Packets: one traversal of the octree's implicit macrocells for a square of rays ---
+
+    static constexpr int kMaxLanes = 16 * 16;
+    /// Rays of one packet, structure of arrays; lanes outside the volume start done.
+    struct Packet {
+      int lanes = 0;
+      std::array<int, kMaxLanes> px{}, py{};
+      std::array<PrimaryRay, kMaxLanes> ray{};
+      std::array<Hit, kMaxLanes> hit{};
+      std::array<double, kMaxLanes> inv_dk{};
+      std::array<Vec3d, kMaxLanes> inv{};
+      std::array<uint8_t, kMaxLanes> live{};
+      Vec3d o{0.0};
+      double su_lo = 0, su_hi = 0, sv_lo = 0, sv_hi = 0;  // slopes du/dK, dv/dK over the live lanes
+      bool forward = true;                                // the live lanes' d_K > 0
+    };
+    std::unique_ptr<Packet> packet;
+    /// Per depth, the lanes whose rays still cross the node being visited there and can still
+    /// find a nearer hit in it: a node tests only its parent's lanes.
+    std::vector<std::vector<uint16_t>> lanes_at;
+
+    /// The lanes of `from` whose ray crosses box b before its hit so far, into `to`.
+    void lanes_through(const Packet& p, const Box3d& b, const std::vector<uint16_t>& from, std::vector<uint16_t>& to) const {
+      to.clear();
+      for (uint16_t i : from) {
+        const PrimaryRay& ray = p.ray[i];
+        const Vec3d& inv = p.inv[i];
+        double t0 = ray.span.t0, t1 = std::min(ray.span.t1, p.hit[i].t);
+        for (int a = 0; a < 3; ++a) {
+          double ta = (b.lo[a] - ray.org[a]) * inv[a], tb = (b.hi[a] - ray.org[a]) * inv[a];
+          if (ta > tb) std::swap(ta, tb);
+          if (std::isnan(ta)) ta = -std::numeric_limits<double>::infinity();
+          if (std::isnan(tb)) tb = std::numeric_limits<double>::infinity();
+          t0 = std::max(t0, ta), t1 = std::min(t1, tb);
+        }
+        if (t0 <= t1) to.push_back(i);
+      }
+    }
+
+    void render_packets(const Tile& tile, int size, FrameBuffers& out) {
+      if (!packet) packet = std::make_unique<Packet>();
+      for (int y0 = tile.y0; y0 < tile.y1; y0 += size)
+        for (int x0 = tile.x0; x0 < tile.x1; x0 += size) {
+          // A partial packet at the image's border holds only the pixels that are there.
+          Packet& p = *packet;
+          p.lanes = 0;
+          for (int y = y0; y < std::min(y0 + size, tile.y1); ++y)
+            for (int x = x0; x < std::min(x0 + size, tile.x1); ++x) {
+              const int i = p.lanes++;
+              p.px[size_t(i)] = x, p.py[size_t(i)] = y;
+              p.ray[size_t(i)] = primary_ray(rays, r.geo_, x, y);
+              p.hit[size_t(i)] = Hit{};
+            }
+          counters.rays += uint64_t(p.lanes);
+          pages.begin_ray();
+          trace_packet(p);
+          for (int i = 0; i < p.lanes; ++i) {
+            PixelResult px;
+            px.color = r.scene_.background;
+            if (p.hit[size_t(i)].surface >= 0) shade(p.ray[size_t(i)], p.hit[size_t(i)], px);
+            write_pixel(out, p.px[size_t(i)], p.py[size_t(i)], px);
+          }
+        }
+    }
+
+    void trace_packet(Packet& p) {
+      const int K = r.major_axis_, U = (K + 1) % 3, V = (K + 2) % 3;
+      int live = 0, forward = 0;
+      p.su_lo = p.sv_lo = std::numeric_limits<double>::infinity();
+      p.su_hi = p.sv_hi = -std::numeric_limits<double>::infinity();
+      for (int i = 0; i < p.lanes; ++i) {
+        const PrimaryRay& ray = p.ray[size_t(i)];
+        p.live[size_t(i)] = ray.hits();
+        if (!ray.hits()) continue;
+        p.o = ray.org;  // one eye: every lane starts there
+        ++live;
+        const double dk = ray.dir[K];
+        forward += dk > 0;
+        p.inv_dk[size_t(i)] = 1.0 / dk;
+        p.inv[size_t(i)] = {1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z};
+        const double su = ray.dir[U] / dk, sv = ray.dir[V] / dk;
+        p.su_lo = std::min(p.su_lo, su), p.su_hi = std::max(p.su_hi, su);
+        p.sv_lo = std::min(p.sv_lo, sv), p.sv_hi = std::max(p.sv_hi, sv);
+      }
+      if (live == 0) return;
+      // Rays that do not all head one way along K (or run parallel to its slices) have no
+      // bounding frustum over K: each goes alone.
+      const bool coherent = (forward == live || forward == 0) && std::isfinite(p.su_lo + p.su_hi + p.sv_lo + p.sv_hi);
+      if (!coherent) {
+        ++counters.nodes;  // counted as the packet's one test
+        for (int i = 0; i < p.lanes; ++i)
+          if (p.live[size_t(i)]) p.hit[size_t(i)] = trace(p.ray[size_t(i)].org, p.ray[size_t(i)].dir, p.ray[size_t(i)].span);
+        return;
+      }
+      p.forward = forward == live;
+      if (lanes_at.size() < size_t(r.layout_.depth) + 1) {
+        lanes_at.resize(size_t(r.layout_.depth) + 1);
+        for (auto& l : lanes_at) l.reserve(kMaxLanes);
+      }
+      std::vector<uint16_t>& all = lanes_at[0];
+      all.clear();
+      for (int i = 0; i < p.lanes; ++i)
+        if (p.live[size_t(i)]) all.push_back(uint16_t(i));
+      Node root;
+      root.page = page(OctreeLayout::page_id(0, Vec3s(0)));
+      root.min = root.page->nodes[0][0].min, root.max = root.page->nodes[0][0].max;
+      descend_packet(p, root, all, K, U, V);
+    }
+
+    /// Whether the packet's frustum meets the box [lo, hi] (finest voxel coordinates): one test
+    /// for every lane, before each lane's own.
+    bool packet_meets(const Packet& p, const Vec3d& lo, const Vec3d& hi, int K, int U, int V) const {
+      double k0 = lo[K], k1 = hi[K];
+      if (p.forward) k0 = std::max(k0, p.o[K]);
+      else k1 = std::min(k1, p.o[K]);
+      if (k0 > k1) return false;
+      const double s0 = k0 - p.o[K], s1 = k1 - p.o[K];
+      const double u_lo = p.o[U] + std::min({s0 * p.su_lo, s0 * p.su_hi, s1 * p.su_lo, s1 * p.su_hi});
+      const double u_hi = p.o[U] + std::max({s0 * p.su_lo, s0 * p.su_hi, s1 * p.su_lo, s1 * p.su_hi});
+      if (u_hi < lo[U] || u_lo > hi[U]) return false;
+      const double v_lo = p.o[V] + std::min({s0 * p.sv_lo, s0 * p.sv_hi, s1 * p.sv_lo, s1 * p.sv_hi});
+      const double v_hi = p.o[V] + std::max({s0 * p.sv_lo, s0 * p.sv_hi, s1 * p.sv_lo, s1 * p.sv_hi});
+      if (v_hi < lo[V] || v_lo > hi[V]) return false;
+      return true;
+    }
+
+    Box3d node_box(const Node& n) const {
+      const int64_t w = width(n.depth);
+      Vec3d lo, hi;
+      for (int a = 0; a < 3; ++a)
+        lo[a] = double(n.c[a] * w), hi[a] = double(std::min((n.c[a] + 1) * w, r.layout_.dims[a] - 1));
+      return {lo, hi};
+    }
+
+    void descend_packet(Packet& p, const Node& n, const std::vector<uint16_t>& parent_lanes, int K, int U, int V) {
+      ++counters.nodes;
+      if (!crosses(n.min, n.max)) return;
+      const Box3d box = node_box(n);
+      if (!packet_meets(p, box.lo, box.hi, K, U, V)) return;
+      std::vector<uint16_t>& lanes = lanes_at[size_t(n.depth) + 1];
+      lanes_through(p, box, parent_lanes, lanes);
+      if (lanes.empty()) return;
+      if (n.unread_page) {
+        Node read = n;
+        read.page = page(n.unread_page);
+        read.unread_page = 0;
+        n.depth == r.layout_.cap_depth() ? packet_cells(p, read, lanes, K, U, V) : descend_children(p, read, lanes, K, U, V);
+        return;
+      }
+      if (n.depth == r.layout_.cap_depth()) return packet_cells(p, n, lanes, K, U, V);
+      descend_children(p, n, lanes, K, U, V);
+    }
+
+    void descend_children(Packet& p, const Node& n, const std::vector<uint16_t>& lanes, int K, int U, int V) {
+      // The half of the children nearer along K first: a lane's hit there is nearer than any
+      // in the far half; within a half, each lane keeps its nearest.
+      const int near = p.forward ? 0 : 1;
+      for (int half : {near, 1 - near})
+        for (int oct = 0; oct < 8; ++oct) {
+          if (((oct >> K) & 1) != half) continue;
+          const Node c = child(n, oct);
+          if (c.depth >= 0) descend_packet(p, c, lanes, K, U, V);
+        }
+    }
+
+    /// A cap's cells for the packet: each live lane visits only the cells its ray crosses in
+    /// each of the cap's slices along K (at most 2 x 2 a slice: K is the major axis), nearer
+    /// slice first, and stops at its first hit; a cell's corners are gathered once, for the
+    /// first lane that needs them, and shared by the others.
+    void packet_cells(Packet& p, const Node& n, const std::vector<uint16_t>& lanes, int K, int U, int V) {
+      const Vec3s lo = n.c * int64_t(2);
+      const Vec3s hi{std::min(lo.x + 1, r.layout_.dims.x - 2), std::min(lo.y + 1, r.layout_.dims.y - 2),
+                     std::min(lo.z + 1, r.layout_.dims.z - 2)};
+      if (hi.x < lo.x || hi.y < lo.y || hi.z < lo.z) return;
+      const T* cap = n.consolidated ? nullptr : n.page->cap_scalars(n.index);
+      double corners[8][8], vlo[8], vhi[8];
+      uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
+      constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
+      for (uint16_t i : lanes) {
+        const PrimaryRay& ray = p.ray[size_t(i)];
+        Hit& hit = p.hit[size_t(i)];
+        const double su = ray.dir[U] * p.inv_dk[size_t(i)], sv = ray.dir[V] * p.inv_dk[size_t(i)];
+        for (int64_t step = 0; step <= hi[K] - lo[K]; ++step) {
+          const int64_t k = p.forward ? lo[K] + step : hi[K] - step;
+          const double s0 = double(k) - p.o[K], s1 = s0 + 1;
+          const double u0 = p.o[U] + s0 * su, u1 = p.o[U] + s1 * su, v0 = p.o[V] + s0 * sv, v1 = p.o[V] + s1 * sv;
+          const int64_t a0 = std::max(lo[U], int64_t(std::floor(std::min(u0, u1) - kSlack)));
+          const int64_t a1 = std::min(hi[U], int64_t(std::floor(std::max(u0, u1) + kSlack)));
+          const int64_t b0 = std::max(lo[V], int64_t(std::floor(std::min(v0, v1) - kSlack)));
+          const int64_t b1 = std::min(hi[V], int64_t(std::floor(std::max(v0, v1) + kSlack)));
+          bool found = false;
+          for (int64_t a = a0; a <= a1; ++a)
+            for (int64_t b = b0; b <= b1; ++b) {
+              Vec3s cell;
+              cell[K] = k, cell[U] = a, cell[V] = b;
+              const int local = int(cell.x - lo.x) | int((cell.y - lo.y) << 1) | int((cell.z - lo.z) << 2);
+              if (state[local] == 0) {
+                cell_corners(cell, n, cap, corners[local], vlo[local], vhi[local]);
+                state[local] = crosses_corners(vlo[local], vhi[local]) ? 1 : 2;
+              }
+              if (state[local] == 2) continue;
+              found |= intersect(cell, corners[local], vlo[local], vhi[local], ray.org, ray.dir, p.inv[size_t(i)], ray.span, hit);
+            }
+          if (found) break;  // the next slice is farther along this ray
+        }
+      }
+    }
   };
 
   const RenderContext& ctx_;
@@ -396,6 +638,7 @@ class OctreeCgtRenderer final : public Renderer {
   ShadingModel shading_;
   std::vector<double> iso_;
   std::vector<Vec3s> nodes_at_;  // per depth
+  int major_axis_ = 0;           // K, chosen in begin_frame()
 };
 
 }  // namespace
@@ -411,6 +654,8 @@ BackendEntry octree_cgt_backend() {
   e.info.params = octree_cgt_params().declarations();
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
     const OctreeCgtParams op = octree_cgt_params().bind(p);
+    if (op.packet & (op.packet - 1))
+      throw Error(Errc::invalid_argument, fmt::format("packet {} is not 1, 2, 4, 8 or 16", op.packet)).with_field("packet");
     return dispatch_value_type(ctx.octree().layout().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       return std::make_unique<OctreeCgtRenderer<decltype(stored)>>(ctx, op);
     });

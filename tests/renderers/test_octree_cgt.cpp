@@ -37,9 +37,10 @@ class OctreeCgt : public ::testing::Test {
   }
   static void TearDownTestSuite() { delete dir_; }
 
-  static Scene scene(const std::string& store, const std::string& what, int size = 64, const std::string& cache = "") {
+  static Scene scene(const std::string& store, const std::string& what, int size = 64, const std::string& cache = "",
+                     int height = -1) {
     const std::string text = R"({"dataset": ")" + dir_->file(store) + R"(", "backend": "octree_cgt", "image": {"width": )" +
-                             std::to_string(size) + R"(, "height": )" + std::to_string(size) + R"(},)" + cache + R"(
+                             std::to_string(size) + R"(, "height": )" + std::to_string(height < 0 ? size : height) + R"(},)" + cache + R"(
         "camera": {"eye": [1.7, -1.0, 1.4], "target": [0.5, 0.5, 0.45], "fov_degrees": 40}, )" + what + "}";
     return parse_scene(text, dir_->file("scene.json"));
   }
@@ -87,6 +88,53 @@ TEST_F(OctreeCgt, HitsWhereTheReferenceDoesToATenThousandthOfAVoxel) {
     const double voxel = RenderSession(s).context().geometry().voxel_size;
     EXPECT_LT(worst / voxel, 1e-4) << "voxels";
     EXPECT_LT(worst_normal, 1e-3);
+  }
+}
+
+TEST_F(OctreeCgt, PacketsOfEverySizeHitWhereSingleRaysDoPartialPacketsIncluded) {
+  // 50x37: the image's last packets in x and y are partial at every packet size.
+  const std::string what = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})";
+  struct Case {
+    const char* store;
+    std::string what;
+  };
+  for (const Case& c : {Case{"ml.store", what}, Case{"fbm.store", R"("mode": "iso", "values": "normalized",
+                          "isosurfaces": [{"value": 0.45}, {"value": 0.6}])"}}) {
+    SCOPED_TRACE(c.store);
+    const auto frame = [&](int packet) {
+      RenderSession session(scene(c.store, c.what, 50, "", 37), testing::backend_options("octree_cgt", {{"packet", double(packet)}}));
+      FrameBuffers fb;
+      session.render(0, fb, {.depth = true, .normals = true});
+      return fb;
+    };
+    const FrameBuffers single = frame(1);
+    int hits = 0;
+    for (int y = 0; y < single.height(); ++y)
+      for (int x = 0; x < single.width(); ++x) hits += std::isfinite(single.depth(x, y));
+    EXPECT_GT(hits, 300);
+    for (int packet : {2, 4, 8, 16}) {
+      SCOPED_TRACE(packet);
+      const FrameBuffers fb = frame(packet);
+      double worst = 0;
+      int mismatched = 0;
+      for (int y = 0; y < fb.height(); ++y)
+        for (int x = 0; x < fb.width(); ++x) {
+          const float a = single.depth(x, y), b = fb.depth(x, y);
+          if (std::isfinite(a) != std::isfinite(b)) ++mismatched;
+          else if (std::isfinite(a)) worst = std::max(worst, std::abs(double(a) - double(b)));
+        }
+      EXPECT_EQ(mismatched, 0);
+      EXPECT_LT(worst, 1e-4) << "world units; voxels are larger";
+      EXPECT_EQ(std::memcmp(single.color.data(), fb.color.data(), fb.color.size() * sizeof(Rgbaf)), 0)
+          << "the same cells, the same roots: the same colours";
+    }
+  }
+  // Anything but a power of two is refused, naming the parameter.
+  try {
+    RenderSession session(scene("ml.store", what), testing::backend_options("octree_cgt", {{"packet", 3.0}}));
+    FAIL() << "packet 3 accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("packet"), std::string::npos) << e.what();
   }
 }
 
