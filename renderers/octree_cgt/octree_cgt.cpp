@@ -57,8 +57,14 @@ class PageMemo {
   PageMemo(PageCache& cache, const OctreeLayout& layout, size_t capacity, RayCounters& counters)
       : cache_(cache), layout_(layout), page_bytes_(layout.page_bytes()), capacity_(capacity), counters_(counters) {}
   const OctreePage<T>* page(uint64_t id) {
-    for (const auto& e : entries_)
-      if (e->id == id) return &e->view;
+    // A direct-mapped index over the entries (each descent asks for its path's pages again).
+    int16_t& slot = index_[size_t((id * 0x9e3779b97f4a7c15ull) >> 57)];
+    if (slot >= 0 && size_t(slot) < entries_.size() && entries_[size_t(slot)]->id == id) return &entries_[size_t(slot)]->view;
+    for (size_t i = 0; i < entries_.size(); ++i)
+      if (entries_[i]->id == id) {
+        if (i < size_t(INT16_MAX)) slot = int16_t(i);
+        return &entries_[i]->view;
+      }
     ++counters_.lookups;
     ++counters_.bricks;  // a page visit
     auto e = std::make_unique<Entry>();
@@ -66,12 +72,13 @@ class PageMemo {
     e->handle = cache_.fetch({RecordKind::octree_page, id});
     e->view = OctreePage<T>::view({e->handle.bytes(), page_bytes_}, layout_);
     entries_.push_back(std::move(e));
+    if (entries_.size() - 1 < size_t(INT16_MAX)) slot = int16_t(entries_.size() - 1);
     return &entries_.back()->view;
   }
   /// For octree_scalars().
   const OctreePage<T>* operator()(uint64_t id) { return page(id); }
   void begin_ray() {
-    if (entries_.size() >= capacity_) entries_.clear(), ++generation_;
+    if (entries_.size() >= capacity_) entries_.clear(), index_.fill(-1), ++generation_;
   }
   /// Changes whenever pages are let go: pointers into them from before are stale.
   uint64_t generation() const { return generation_; }
@@ -87,7 +94,13 @@ class PageMemo {
   size_t page_bytes_, capacity_;
   RayCounters& counters_;
   std::vector<std::unique_ptr<Entry>> entries_;
+  std::array<int16_t, 128> index_ = make_index();
   uint64_t generation_ = 0;
+  static std::array<int16_t, 128> make_index() {
+    std::array<int16_t, 128> a;
+    a.fill(-1);
+    return a;
+  }
 };
 
 template <typename T>
@@ -585,6 +598,32 @@ class OctreeCgtRenderer final : public Renderer {
         }
     }
 
+    /// Voxels lo + {0, 1, 2}^3 of the cap n (lo = 2 n.c), x fastest: the cap's own 8 and its
+    /// forward neighbours', one lookup per neighbouring cap. Voxels past the volume's last are
+    /// never a corner of a cell; they are left at the cap's first.
+    void cap_block(const Node& n, const Vec3s& lo, double block[27]) {
+      const T* own = n.consolidated ? nullptr : n.page->cap_scalars(n.index);
+      for (int nb = 0; nb < 8; ++nb) {
+        const Vec3s off{nb & 1, (nb >> 1) & 1, (nb >> 2) & 1};
+        const Vec3s cc = n.c + off;
+        if (cc.x >= r.nodes_at_.back().x || cc.y >= r.nodes_at_.back().y || cc.z >= r.nodes_at_.back().z) {
+          for (int64_t z = 0; z < 3; ++z)
+            for (int64_t y = 0; y < 3; ++y)
+              for (int64_t x = 0; x < 3; ++x)
+                if ((x == 2) == bool(off.x) && (y == 2) == bool(off.y) && (z == 2) == bool(off.z))
+                  block[(z * 3 + y) * 3 + x] = own ? double(own[0]) : n.constant;
+          continue;
+        }
+        const OctreeScalars<T>* other = nb == 0 ? nullptr : &cap_at(cc);
+        for (int64_t z = off.z * 2; z <= (off.z ? 2 : 1); ++z)
+          for (int64_t y = off.y * 2; y <= (off.y ? 2 : 1); ++y)
+            for (int64_t x = off.x * 2; x <= (off.x ? 2 : 1); ++x) {
+              const int octant = int((lo.x + x) & 1) | int(((lo.y + y) & 1) << 1) | int(((lo.z + z) & 1) << 2);
+              block[(z * 3 + y) * 3 + x] = nb == 0 ? (own ? double(own[octant]) : n.constant) : double((*other)[octant]);
+            }
+      }
+    }
+
     /// A cap's cells for the packet: each live lane visits only the cells its ray crosses in
     /// each of the cap's slices along K (at most 2 x 2 a slice: K is the major axis), nearer
     /// slice first, and stops at its first hit; a cell's corners are gathered once, for the
@@ -594,7 +633,10 @@ class OctreeCgtRenderer final : public Renderer {
       const Vec3s hi{std::min(lo.x + 1, r.layout_.dims.x - 2), std::min(lo.y + 1, r.layout_.dims.y - 2),
                      std::min(lo.z + 1, r.layout_.dims.z - 2)};
       if (hi.x < lo.x || hi.y < lo.y || hi.z < lo.z) return;
-      const T* cap = n.consolidated ? nullptr : n.page->cap_scalars(n.index);
+      // The cap's voxels and its forward neighbours' (3 x 3 x 3, from up to 8 caps), gathered
+      // once: every cell's corners are read from them.
+      double block[27];
+      cap_block(n, lo, block);
       double corners[8][8], vlo[8], vhi[8];
       uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
       constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
@@ -617,8 +659,14 @@ class OctreeCgtRenderer final : public Renderer {
               cell[K] = k, cell[U] = a, cell[V] = b;
               const int local = int(cell.x - lo.x) | int((cell.y - lo.y) << 1) | int((cell.z - lo.z) << 2);
               if (state[local] == 0) {
-                cell_corners(cell, n, cap, corners[local], vlo[local], vhi[local]);
-                state[local] = crosses_corners(vlo[local], vhi[local]) ? 1 : 2;
+                double& l = vlo[local] = std::numeric_limits<double>::max();
+                double& h = vhi[local] = std::numeric_limits<double>::lowest();
+                const Vec3s q = cell - lo;
+                for (int m = 0; m < 8; ++m) {
+                  const double v = block[((q.z + ((m >> 2) & 1)) * 3 + q.y + ((m >> 1) & 1)) * 3 + q.x + (m & 1)];
+                  corners[local][m] = v, l = std::min(l, v), h = std::max(h, v);
+                }
+                state[local] = crosses_corners(l, h) ? 1 : 2;
               }
               if (state[local] == 2) continue;
               found |= intersect(cell, corners[local], vlo[local], vhi[local], ray.org, ray.dir, p.inv[size_t(i)], ray.span, hit);
