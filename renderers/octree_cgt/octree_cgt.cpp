@@ -2,13 +2,17 @@
 // Hansen, Hagen, "Interactive isosurface ray tracing of large octree volumes"), its pages read
 // through the cache.
 //
-// This file holds the single-ray mode the paper measures its coherent traversal against: a
-// front-to-back descent of the octree per ray, culling nodes whose min/max (cells of every
-// finer level, forward neighbours included) misses every isovalue, down to the cap nodes; in
-// each cap's 2x2x2 cells the trilinear cubic along the ray is solved exactly (first root,
-// tangent roots included), corners from the cap or, across caps, by a descent from the root.
-// Consolidated subtrees are walked only along their forward faces, where their cells meet
-// other values.
+// Two modes of one structure. Packets (the default, 8 x 8 rays): a packet descends the
+// octree's implicit macrocells once, nearer half along the frame's major axis K first, culled
+// by its frustum over K and by node ranges (cells of every finer level, forward neighbours
+// included); each node keeps the lanes whose ray crosses it before their hit so far; in a cap,
+// each lane visits the cells its ray crosses slice by slice along K, corners read from the
+// cap's 3x3x3 voxels gathered once. The single-ray mode (`packet` 1), which the paper measures
+// the coherent one against: a front-to-back descent per ray, children in entry order. In both,
+// each cell's trilinear cubic along the ray is solved exactly (first root, tangent roots
+// included), and consolidated subtrees are walked only along their forward faces, where their
+// cells meet other values. `mcell`, `cell` and `slice` switch the culling and the shared
+// gathering off, for the paper's Table II; the image does not change.
 
 #include <algorithm>
 #include <array>
@@ -33,6 +37,9 @@ namespace {
 
 struct OctreeCgtParams {
   int packet{};             // rays per side of a packet; 1: the single-ray mode
+  bool mcell{};             // cull macrocells (octree nodes, pages) by their range
+  bool cell{};              // cull cells by their corners' range before solving their cubic
+  bool slice{};             // packets: a cap's voxels gathered once for all its cells
   int pinned_pages{};       // pages a tile keeps pinned before it lets them go
   double root_tolerance{};  // relative |g| at an extremum of the cell's cubic that counts as a touching root
 };
@@ -41,6 +48,10 @@ const ParamTable<OctreeCgtParams>& octree_cgt_params() {
   static const ParamTable<OctreeCgtParams> table{
       {"packet", &OctreeCgtParams::packet, 8, 1, 16,
        "packets of packet x packet rays traverse the octree together (2, 4, 8 or 16); 1: single-ray mode"},
+      {"mcell", &OctreeCgtParams::mcell, 1, 0, 1, "1: skip octree nodes and pages whose range holds no isovalue; 0: visit them (Table II)"},
+      {"cell", &OctreeCgtParams::cell, 1, 0, 1, "1: skip cells whose corners' range holds no isovalue; 0: solve every cell's cubic"},
+      {"slice", &OctreeCgtParams::slice, 1, 0, 1,
+       "packets, 1: a cap's 3x3x3 voxels gathered once for its cells; 0: every cell looks up its 8 corners"},
       {"pinned_pages", &OctreeCgtParams::pinned_pages, 64, 4, 4096,
        "octree pages one tile keeps pinned in the cache's L1 while it renders (then released, and fetched again)"},
       {"root_tolerance", &OctreeCgtParams::root_tolerance, 1e-12, 0.0, 1e-3,
@@ -195,7 +206,9 @@ class OctreeCgtRenderer final : public Renderer {
       return e.scalars;
     }
 
+    /// Whether a node's (or page's) range holds an isovalue; always, without macrocell culling.
     bool crosses(float lo, float hi) const {
+      if (!r.p_.mcell) return true;
       for (double iso : r.iso_)
         if (iso >= lo && iso <= hi) return true;
       return false;
@@ -305,7 +318,7 @@ class OctreeCgtRenderer final : public Renderer {
         const int64_t w = width(c.depth);
         bool face = false;
         for (int a = 0; a < 3; ++a) face |= (c.c[a] + 1) * w >= n.forward_end[a];
-        if (!face && !std::any_of(r.iso_.begin(), r.iso_.end(), [&](double v) { return v == n.constant; }))
+        if (r.p_.mcell && !face && !std::any_of(r.iso_.begin(), r.iso_.end(), [&](double v) { return v == n.constant; }))
           return none();
         c.consolidated = true, c.constant = n.constant, c.min = n.min, c.max = n.max, c.forward_end = n.forward_end;
         return c;
@@ -387,6 +400,7 @@ class OctreeCgtRenderer final : public Renderer {
     }
 
     bool crosses_corners(double lo, double hi) const {
+      if (!r.p_.cell) return true;
       for (double iso : r.iso_)
         if (iso >= lo && iso <= hi) return true;
       return false;
@@ -417,7 +431,7 @@ class OctreeCgtRenderer final : public Renderer {
       bool found = false;
       for (size_t i = 0; i < r.iso_.size(); ++i) {
         const double iso = r.iso_[i];
-        if (iso < lo || iso > hi) continue;
+        if (r.p_.cell && (iso < lo || iso > hi)) continue;
         const Vec3d p0 = o + d * cs.t0;
         const double u0[3] = {p0.x - double(cell.x), p0.y - double(cell.y), p0.z - double(cell.z)};
         const double du[3] = {d.x, d.y, d.z};
@@ -636,7 +650,7 @@ class OctreeCgtRenderer final : public Renderer {
       // The cap's voxels and its forward neighbours' (3 x 3 x 3, from up to 8 caps), gathered
       // once: every cell's corners are read from them.
       double block[27];
-      cap_block(n, lo, block);
+      if (r.p_.slice) cap_block(n, lo, block);
       double corners[8][8], vlo[8], vhi[8];
       uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
       constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
@@ -658,6 +672,10 @@ class OctreeCgtRenderer final : public Renderer {
               Vec3s cell;
               cell[K] = k, cell[U] = a, cell[V] = b;
               const int local = int(cell.x - lo.x) | int((cell.y - lo.y) << 1) | int((cell.z - lo.z) << 2);
+              if (state[local] == 0 && !r.p_.slice) {
+                cell_corners(cell, n, n.consolidated ? nullptr : n.page->cap_scalars(n.index), corners[local], vlo[local], vhi[local]);
+                state[local] = crosses_corners(vlo[local], vhi[local]) ? 1 : 2;
+              }
               if (state[local] == 0) {
                 double& l = vlo[local] = std::numeric_limits<double>::max();
                 double& h = vhi[local] = std::numeric_limits<double>::lowest();

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <set>
 
 #include "cache/trace.h"
@@ -136,6 +137,34 @@ TEST_F(OctreeCgt, PacketsOfEverySizeHitWhereSingleRaysDoPartialPacketsIncluded) 
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("packet"), std::string::npos) << e.what();
   }
+}
+
+TEST_F(OctreeCgt, EveryOptimisationOnOrOffGivesTheSameImage) {
+  const Scene s = scene("fbm.store", R"("mode": "iso", "values": "normalized", "isosurfaces": [{"value": 0.45}, {"value": 0.6}],
+      "shading": {"light": "headlight"})", 40);
+  const auto frame = [&](std::map<std::string, double> params, FrameStats* stats = nullptr) {
+    RenderSession session(s, testing::backend_options("octree_cgt", std::move(params)));
+    FrameBuffers fb;
+    const FrameStats st = session.render(0, fb, {.depth = true, .normals = true});
+    if (stats) *stats = st;
+    return fb;
+  };
+  FrameStats all_on, all_off;
+  const FrameBuffers expected = frame({}, &all_on);
+  for (double packet : {1.0, 8.0})
+    for (int off = 0; off < 8; ++off) {
+      std::map<std::string, double> p{{"packet", packet}, {"mcell", double(!(off & 1))}, {"cell", double(!(off & 2))},
+                                      {"slice", double(!(off & 4))}};
+      SCOPED_TRACE(::testing::Message() << "packet " << packet << " mcell " << p["mcell"] << " cell " << p["cell"] << " slice " << p["slice"]);
+      FrameStats stats;
+      const FrameBuffers fb = frame(p, &stats);
+      EXPECT_EQ(std::memcmp(expected.color.data(), fb.color.data(), fb.color.size() * sizeof(Rgbaf)), 0);
+      EXPECT_EQ(std::memcmp(expected.depth.data(), fb.depth.data(), fb.depth.size() * sizeof(float)), 0);
+      if (packet == 8 && off == 7) all_off = stats;
+    }
+  // What the switches save is real: culling leaves fewer cells and nodes to visit.
+  EXPECT_LT(all_on.counters.cells, all_off.counters.cells);
+  EXPECT_LT(all_on.counters.nodes, all_off.counters.nodes);
 }
 
 TEST_F(OctreeCgt, ReadsOnlyPagesWhoseRangeHoldsTheIsovalueAndSkipsTheOthersItsRaysCross) {
