@@ -40,6 +40,8 @@ struct OctreeCgtParams {
   bool mcell{};             // cull macrocells (octree nodes, pages) by their range
   bool cell{};              // cull cells by their corners' range before solving their cubic
   bool slice{};             // packets: a cap's voxels gathered once for all its cells
+  double dpdv{};            // level of detail: pixels a coarse voxel may cover; 0: the finest level
+  bool show_levels{};       // colour hits by the level they were found at
   int pinned_pages{};       // pages a tile keeps pinned before it lets them go
   double root_tolerance{};  // relative |g| at an extremum of the cell's cubic that counts as a touching root
 };
@@ -52,6 +54,10 @@ const ParamTable<OctreeCgtParams>& octree_cgt_params() {
       {"cell", &OctreeCgtParams::cell, 1, 0, 1, "1: skip cells whose corners' range holds no isovalue; 0: solve every cell's cubic"},
       {"slice", &OctreeCgtParams::slice, 1, 0, 1,
        "packets, 1: a cap's 3x3x3 voxels gathered once for its cells; 0: every cell looks up its 8 corners"},
+      {"dpdv", &OctreeCgtParams::dpdv, 0.0, 0.0, 64.0,
+       "level of detail (the paper's dP/dV): a node's own coarser voxels are used where one covers at most this many pixels "
+       "at the node's nearest slice along K; 0: always the finest"},
+      {"show_levels", &OctreeCgtParams::show_levels, 0, 0, 1, "1: colour each hit by the level of detail it was found at"},
       {"pinned_pages", &OctreeCgtParams::pinned_pages, 64, 4, 4096,
        "octree pages one tile keeps pinned in the cache's L1 while it renders (then released, and fetched again)"},
       {"root_tolerance", &OctreeCgtParams::root_tolerance, 1e-12, 0.0, 1e-3,
@@ -122,6 +128,7 @@ class OctreeCgtRenderer final : public Renderer {
         shading_(scene_.shading, geo_) {
     for (const auto& s : scene_.isosurfaces) iso_.push_back(s.value);
     for (int d = 0; d < layout_.depth; ++d) nodes_at_.push_back(layout_.nodes_at(d));
+    for (int l = 0; l < layout_.depth; ++l) level_dims_.push_back(layout_.level_dims(l));
   }
 
   void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
@@ -138,12 +145,27 @@ class OctreeCgtRenderer final : public Renderer {
     setup.camera.basis(f, right, up);
     const Vec3d fv = f / geo_.spacing;
     major_axis_ = std::abs(fv.x) >= std::abs(fv.y) && std::abs(fv.x) >= std::abs(fv.z) ? 0 : std::abs(fv.y) >= std::abs(fv.z) ? 1 : 2;
+    // The transition slices (the paper's Algorithm 2): a node at depth d is drawn with its own
+    // level-L voxels from K distance lod_k_[d] on, where one of them covers dpdv pixels. A pixel
+    // covers z * pixel_angle of world at view depth z, and a slice k voxels away along K lies at
+    // z = k * spacing_K / |forward_K|.
+    const int K = major_axis_;
+    eye_k_ = geo_.to_voxel(setup.camera.eye)[K];
+    const double pixel_angle = 2.0 * std::tan(setup.camera.fov_degrees * M_PI / 360.0) / double(std::max(setup.height, 1));
+    const double fk = std::max(std::abs(f[K]), 1e-12);
+    lod_k_.assign(size_t(layout_.depth), std::numeric_limits<double>::infinity());
+    if (p_.dpdv > 0)
+      for (int d = 0; d < layout_.depth; ++d) {
+        const double voxel = double(int64_t(1) << layout_.level_of_depth(d)) * geo_.voxel_size;
+        lod_k_[size_t(d)] = voxel / (p_.dpdv * pixel_angle) * fk / geo_.spacing[K];
+      }
   }
 
  private:
   struct Hit {
     double t = std::numeric_limits<double>::infinity();
     int surface = -1;
+    int level = 0;            // the level of detail of the cell it was found in (0: finest)
     Vec3d normal_voxel{0.0};  // gradient of the interpolant, voxel coordinates
   };
 
@@ -189,6 +211,7 @@ class OctreeCgtRenderer final : public Renderer {
     /// Caps near the ray, found by descent once each: a cell's corners lie in up to 8 caps,
     /// and the next cells along the ray share most of them.
     struct CapEntry {
+      int depth = -1;
       Vec3s c{-1};
       uint64_t generation = ~uint64_t(0);
       OctreeScalars<T> scalars;
@@ -196,14 +219,49 @@ class OctreeCgtRenderer final : public Renderer {
     std::array<CapEntry, 16> caps{};
     size_t next_cap = 0;
 
-    const OctreeScalars<T>& cap_at(const Vec3s& c) {
+    /// The scalars of the node at depth d and coordinates c (a cap, or a coarser node where the
+    /// level of detail stops above the caps).
+    const OctreeScalars<T>& scalars_at(int d, const Vec3s& c) {
       for (const CapEntry& e : caps)
-        if (e.c == c && e.generation == pages.generation()) return e.scalars;
+        if (e.c == c && e.depth == d && e.generation == pages.generation()) return e.scalars;
       ++counters.samples;  // a lookup of the octree
       CapEntry& e = caps[next_cap++ % caps.size()];
-      e.scalars = octree_scalars<T>(r.layout_, pages, r.layout_.cap_depth(), c);
-      e.c = c, e.generation = pages.generation();
+      e.scalars = octree_scalars<T>(r.layout_, pages, d, c);
+      e.c = c, e.depth = d, e.generation = pages.generation();
       return e.scalars;
+    }
+
+    /// A node's own 8 scalars (null for one inside a consolidated subtree: its value is n.constant).
+    const T* own_scalars(const Node& n) const {
+      if (n.consolidated) return nullptr;
+      return n.depth == r.layout_.cap_depth() ? n.page->cap_scalars(n.index) : n.page->node_scalars(n.level, n.index);
+    }
+
+    /// Whether the level of detail stops at node n: one of its voxels covers at most dpdv pixels
+    /// at its nearest slice along K (the frame's transition slices).
+    bool lod_leaf(const Node& n) const {
+      if (n.depth == r.layout_.cap_depth()) return true;
+      if (r.p_.dpdv <= 0) return false;
+      const int K = r.major_axis_;
+      const int64_t w = width(n.depth);
+      const double lo = double(n.c[K] * w), hi = double((n.c[K] + 1) * w);
+      const double e = r.eye_k_;
+      const double distance = e < lo ? lo - e : e > hi ? e - hi : 0.0;
+      return distance >= r.lod_k_[size_t(n.depth)];
+    }
+
+    /// How far a node's cells reach past its region at the levels of detail it or a node below it
+    /// may be drawn at: a level-L voxel i sits at finest coordinate (i + 1/2) 2^L - 1/2, so
+    /// level-L cells reach (2^L - 1) / 2 past. The coarsest level possible in the subtree is
+    /// that of the shallowest depth whose transition slice lies within the node's K extent.
+    double lod_reach(const Node& n) const {
+      if (r.p_.dpdv <= 0) return 0;
+      const int K = r.major_axis_;
+      const int64_t w = width(n.depth);
+      const double far = std::max(std::abs(double(n.c[K] * w) - r.eye_k_), std::abs(double((n.c[K] + 1) * w) - r.eye_k_));
+      for (int d = n.depth; d < r.layout_.cap_depth(); ++d)
+        if (r.lod_k_[size_t(d)] <= far) return 0.5 * double((int64_t(1) << r.layout_.level_of_depth(d)) - 1);
+      return 0;
     }
 
     /// Whether a node's (or page's) range holds an isovalue; always, without macrocell culling.
@@ -234,6 +292,11 @@ class OctreeCgtRenderer final : public Renderer {
       px.depth = h.t;
       px.alpha = 1;
       px.color = r.scene_.isosurfaces[size_t(h.surface)].color;
+      if (r.p_.show_levels) {
+        static const Vec3f kLevels[] = {{0.9f, 0.9f, 0.9f}, {0.2f, 0.6f, 1.0f}, {0.3f, 0.9f, 0.3f},
+                                        {1.0f, 0.8f, 0.2f}, {1.0f, 0.4f, 0.2f}, {0.9f, 0.2f, 0.8f}};
+        px.color = kLevels[std::min<size_t>(size_t(h.level), std::size(kLevels) - 1)];
+      }
       if (!r.ctx_.needs_gradients(setup.outputs)) return;
       ++counters.gradients;
       const Vec3d n = facing_normal(h.normal_voxel / r.geo_.spacing, ray.world.dir);
@@ -259,9 +322,10 @@ class OctreeCgtRenderer final : public Renderer {
     /// last voxel (a cell's upper corner lies in the next node).
     Interval<double> node_span(const Node& n, const Vec3d& o, const Vec3d& inv, Interval<double> span) const {
       const int64_t w = width(n.depth);
+      const double reach = lod_reach(n);
       Interval<double> s = span;
       for (int a = 0; a < 3; ++a) {
-        const double lo = double(n.c[a] * w), hi = double(std::min((n.c[a] + 1) * w, r.layout_.dims[a] - 1));
+        const double lo = double(n.c[a] * w), hi = std::min(double((n.c[a] + 1) * w) + reach, double(r.layout_.dims[a] - 1));
         double t0 = (lo - o[a]) * inv[a], t1 = (hi - o[a]) * inv[a];
         if (t0 > t1) std::swap(t0, t1);
         if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();  // on a face, parallel to it
@@ -283,8 +347,8 @@ class OctreeCgtRenderer final : public Renderer {
         read.unread_page = 0;
         return descend(read, o, d, inv, span, best);
       }
-      if (n.depth == r.layout_.cap_depth()) {
-        cells(n, o, d, s, best);
+      if (lod_leaf(n)) {
+        single_cells(n, o, d, span, best);
         return best.surface >= 0;
       }
       // Children front to back: order by where the ray enters each.
@@ -300,7 +364,9 @@ class OctreeCgtRenderer final : public Renderer {
       sort_by_entry(order, count);
       for (int i = 0; i < count; ++i) {
         if (order[size_t(i)].first >= best.t) break;
-        if (descend(child(n, order[size_t(i)].second), o, d, inv, s, best)) return true;
+        // No return at a child's hit: with levels of detail a coarser neighbour's cells reach
+        // past its region, so a later sibling entered before the hit may hold a nearer one.
+        descend(child(n, order[size_t(i)].second), o, d, inv, s, best);
       }
       return false;
     }
@@ -354,40 +420,29 @@ class OctreeCgtRenderer final : public Renderer {
       return c;
     }
 
-    /// The 2x2x2 cells of a cap (or of a consolidated node at the cap depth), in ray order.
-    void cells(const Node& n, const Vec3d& o, const Vec3d& d, Interval<double> s, Hit& best) {
-      const Vec3s lo = n.c * int64_t(2);
-      const Vec3s hi{std::min(lo.x + 1, r.layout_.dims.x - 2), std::min(lo.y + 1, r.layout_.dims.y - 2),
-                     std::min(lo.z + 1, r.layout_.dims.z - 2)};
-      const T* cap = n.consolidated ? nullptr : n.page->cap_scalars(n.index);
-      std::array<std::pair<double, Vec3s>, 8> order;
-      int count = 0;
-      const Vec3d inv{1.0 / d.x, 1.0 / d.y, 1.0 / d.z};
-      for (int64_t z = lo.z; z <= hi.z; ++z)
-        for (int64_t y = lo.y; y <= hi.y; ++y)
-          for (int64_t x = lo.x; x <= hi.x; ++x) {
-            Interval<double> cs = s;
-            const Vec3s cell{x, y, z};
-            for (int a = 0; a < 3; ++a) {
-              double t0 = (double(cell[a]) - o[a]) * inv[a], t1 = (double(cell[a] + 1) - o[a]) * inv[a];
-              if (t0 > t1) std::swap(t0, t1);
-              if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();
-              if (std::isnan(t1)) t1 = std::numeric_limits<double>::infinity();
-              cs.t0 = std::max(cs.t0, t0), cs.t1 = std::min(cs.t1, t1);
-            }
-            if (cs.t0 <= cs.t1) order[size_t(count++)] = {cs.t0, cell};
-          }
-      sort_by_entry(order, count);
-      for (int i = 0; i < count; ++i) {
-        if (order[size_t(i)].first >= best.t) return;
-        if (cell(order[size_t(i)].second, n, cap, o, d, s, best)) return;
-      }
+    /// The cells of a leaf node for one ray: the packets' cell code with one lane, K the ray's
+    /// own major axis (never parallel to its slices).
+    void single_cells(const Node& n, const Vec3d& o, const Vec3d& d, Interval<double> span, Hit& best) {
+      if (!single) single = std::make_unique<Packet>();
+      Packet& p = *single;
+      const int K = std::abs(d.x) >= std::abs(d.y) && std::abs(d.x) >= std::abs(d.z) ? 0 : std::abs(d.y) >= std::abs(d.z) ? 1 : 2;
+      p.lanes = 1;
+      p.ray[0].org = o, p.ray[0].dir = d, p.ray[0].span = span;
+      p.inv[0] = {1.0 / d.x, 1.0 / d.y, 1.0 / d.z};
+      p.inv_dk[0] = 1.0 / d[K];
+      p.o = o;
+      p.forward = d[K] > 0;
+      p.hit[0] = best;
+      const std::vector<uint16_t> lane{0};
+      packet_cells(p, n, lane, K, (K + 1) % 3, (K + 2) % 3);
+      best = p.hit[0];
     }
 
-    double corner(const Vec3s& v, const Node& n, const T* cap) {
+    /// Voxel v of the level node n holds (its own scalars, or a neighbour's at n's depth).
+    double corner(const Vec3s& v, const Node& n, const T* own) {
       const int octant = int(v.x & 1) | int((v.y & 1) << 1) | int((v.z & 1) << 2);
-      if (v.x >> 1 == n.c.x && v.y >> 1 == n.c.y && v.z >> 1 == n.c.z) return n.consolidated ? n.constant : double(cap[octant]);
-      return double(cap_at({v.x >> 1, v.y >> 1, v.z >> 1})[octant]);
+      if (v.x >> 1 == n.c.x && v.y >> 1 == n.c.y && v.z >> 1 == n.c.z) return n.consolidated ? n.constant : double(own[octant]);
+      return double(scalars_at(n.depth, {v.x >> 1, v.y >> 1, v.z >> 1})[octant]);
     }
 
     /// A cell's 8 corners (index dx + 2 dy + 4 dz) and their range.
@@ -404,15 +459,6 @@ class OctreeCgtRenderer final : public Renderer {
       for (double iso : r.iso_)
         if (iso >= lo && iso <= hi) return true;
       return false;
-    }
-
-    /// Intersects one cell; true when it holds a hit.
-    bool cell(const Vec3s& cell, const Node& n, const T* cap, const Vec3d& o, const Vec3d& d, Interval<double> s,
-              Hit& best) {
-      double c[8], lo, hi;
-      cell_corners(cell, n, cap, c, lo, hi);
-      const Vec3d inv{1.0 / d.x, 1.0 / d.y, 1.0 / d.z};
-      return intersect(cell, c, lo, hi, o, d, inv, s, best);
     }
 
     /// One ray against one cell of corners c: the first root of each isosurface's cubic.
@@ -464,6 +510,7 @@ class OctreeCgtRenderer final : public Renderer {
       bool forward = true;                                // the live lanes' d_K > 0
     };
     std::unique_ptr<Packet> packet;
+    std::unique_ptr<Packet> single;  // the one lane of single_cells()
     /// Per depth, the lanes whose rays still cross the node being visited there and can still
     /// find a nearer hit in it: a node tests only its parent's lanes.
     std::vector<std::vector<uint16_t>> lanes_at;
@@ -575,9 +622,10 @@ class OctreeCgtRenderer final : public Renderer {
 
     Box3d node_box(const Node& n) const {
       const int64_t w = width(n.depth);
+      const double reach = lod_reach(n);
       Vec3d lo, hi;
       for (int a = 0; a < 3; ++a)
-        lo[a] = double(n.c[a] * w), hi[a] = double(std::min((n.c[a] + 1) * w, r.layout_.dims[a] - 1));
+        lo[a] = double(n.c[a] * w), hi[a] = std::min(double((n.c[a] + 1) * w) + reach, double(r.layout_.dims[a] - 1));
       return {lo, hi};
     }
 
@@ -593,10 +641,10 @@ class OctreeCgtRenderer final : public Renderer {
         Node read = n;
         read.page = page(n.unread_page);
         read.unread_page = 0;
-        n.depth == r.layout_.cap_depth() ? packet_cells(p, read, lanes, K, U, V) : descend_children(p, read, lanes, K, U, V);
+        lod_leaf(read) ? packet_cells(p, read, lanes, K, U, V) : descend_children(p, read, lanes, K, U, V);
         return;
       }
-      if (n.depth == r.layout_.cap_depth()) return packet_cells(p, n, lanes, K, U, V);
+      if (lod_leaf(n)) return packet_cells(p, n, lanes, K, U, V);
       descend_children(p, n, lanes, K, U, V);
     }
 
@@ -616,11 +664,12 @@ class OctreeCgtRenderer final : public Renderer {
     /// forward neighbours', one lookup per neighbouring cap. Voxels past the volume's last are
     /// never a corner of a cell; they are left at the cap's first.
     void cap_block(const Node& n, const Vec3s& lo, double block[27]) {
-      const T* own = n.consolidated ? nullptr : n.page->cap_scalars(n.index);
+      const T* own = own_scalars(n);
+      const Vec3s all = r.nodes_at_[size_t(n.depth)];
       for (int nb = 0; nb < 8; ++nb) {
         const Vec3s off{nb & 1, (nb >> 1) & 1, (nb >> 2) & 1};
         const Vec3s cc = n.c + off;
-        if (cc.x >= r.nodes_at_.back().x || cc.y >= r.nodes_at_.back().y || cc.z >= r.nodes_at_.back().z) {
+        if (cc.x >= all.x || cc.y >= all.y || cc.z >= all.z) {
           for (int64_t z = 0; z < 3; ++z)
             for (int64_t y = 0; y < 3; ++y)
               for (int64_t x = 0; x < 3; ++x)
@@ -628,7 +677,7 @@ class OctreeCgtRenderer final : public Renderer {
                   block[(z * 3 + y) * 3 + x] = own ? double(own[0]) : n.constant;
           continue;
         }
-        const OctreeScalars<T>* other = nb == 0 ? nullptr : &cap_at(cc);
+        const OctreeScalars<T>* other = nb == 0 ? nullptr : &scalars_at(n.depth, cc);
         for (int64_t z = off.z * 2; z <= (off.z ? 2 : 1); ++z)
           for (int64_t y = off.y * 2; y <= (off.y ? 2 : 1); ++y)
             for (int64_t x = off.x * 2; x <= (off.x ? 2 : 1); ++x) {
@@ -643,10 +692,16 @@ class OctreeCgtRenderer final : public Renderer {
     /// slice first, and stops at its first hit; a cell's corners are gathered once, for the
     /// first lane that needs them, and shared by the others.
     void packet_cells(Packet& p, const Node& n, const std::vector<uint16_t>& lanes, int K, int U, int V) {
+      // The node's cells at its own level L (0 at the caps): coordinates in level-L voxels, where
+      // voxel i sits at finest coordinate (i + 1/2) 2^L - 1/2; rays keep their parameter t.
+      const int L = r.layout_.level_of_depth(n.depth);
+      const double scale = 1.0 / double(int64_t(1) << L);
+      const auto to_level = [&](const Vec3d& x) { return L ? (x + Vec3d(0.5)) * scale - Vec3d(0.5) : x; };
+      const Vec3s dims = r.level_dims_[size_t(L)];
       const Vec3s lo = n.c * int64_t(2);
-      const Vec3s hi{std::min(lo.x + 1, r.layout_.dims.x - 2), std::min(lo.y + 1, r.layout_.dims.y - 2),
-                     std::min(lo.z + 1, r.layout_.dims.z - 2)};
+      const Vec3s hi{std::min(lo.x + 1, dims.x - 2), std::min(lo.y + 1, dims.y - 2), std::min(lo.z + 1, dims.z - 2)};
       if (hi.x < lo.x || hi.y < lo.y || hi.z < lo.z) return;
+      const Vec3d o = to_level(p.o);
       // The cap's voxels and its forward neighbours' (3 x 3 x 3, from up to 8 caps), gathered
       // once: every cell's corners are read from them.
       double block[27];
@@ -657,11 +712,15 @@ class OctreeCgtRenderer final : public Renderer {
       for (uint16_t i : lanes) {
         const PrimaryRay& ray = p.ray[size_t(i)];
         Hit& hit = p.hit[size_t(i)];
+        const Vec3d org = to_level(ray.org), dir = L ? ray.dir * scale : ray.dir;
+        const Vec3d inv = L ? p.inv[size_t(i)] / scale : p.inv[size_t(i)];
         const double su = ray.dir[U] * p.inv_dk[size_t(i)], sv = ray.dir[V] * p.inv_dk[size_t(i)];
+        const int surface_before = hit.surface;
+        const double t_before = hit.t;
         for (int64_t step = 0; step <= hi[K] - lo[K]; ++step) {
           const int64_t k = p.forward ? lo[K] + step : hi[K] - step;
-          const double s0 = double(k) - p.o[K], s1 = s0 + 1;
-          const double u0 = p.o[U] + s0 * su, u1 = p.o[U] + s1 * su, v0 = p.o[V] + s0 * sv, v1 = p.o[V] + s1 * sv;
+          const double s0 = double(k) - o[K], s1 = s0 + 1;
+          const double u0 = o[U] + s0 * su, u1 = o[U] + s1 * su, v0 = o[V] + s0 * sv, v1 = o[V] + s1 * sv;
           const int64_t a0 = std::max(lo[U], int64_t(std::floor(std::min(u0, u1) - kSlack)));
           const int64_t a1 = std::min(hi[U], int64_t(std::floor(std::max(u0, u1) + kSlack)));
           const int64_t b0 = std::max(lo[V], int64_t(std::floor(std::min(v0, v1) - kSlack)));
@@ -673,7 +732,7 @@ class OctreeCgtRenderer final : public Renderer {
               cell[K] = k, cell[U] = a, cell[V] = b;
               const int local = int(cell.x - lo.x) | int((cell.y - lo.y) << 1) | int((cell.z - lo.z) << 2);
               if (state[local] == 0 && !r.p_.slice) {
-                cell_corners(cell, n, n.consolidated ? nullptr : n.page->cap_scalars(n.index), corners[local], vlo[local], vhi[local]);
+                cell_corners(cell, n, own_scalars(n), corners[local], vlo[local], vhi[local]);
                 state[local] = crosses_corners(vlo[local], vhi[local]) ? 1 : 2;
               }
               if (state[local] == 0) {
@@ -687,10 +746,11 @@ class OctreeCgtRenderer final : public Renderer {
                 state[local] = crosses_corners(l, h) ? 1 : 2;
               }
               if (state[local] == 2) continue;
-              found |= intersect(cell, corners[local], vlo[local], vhi[local], ray.org, ray.dir, p.inv[size_t(i)], ray.span, hit);
+              found |= intersect(cell, corners[local], vlo[local], vhi[local], org, dir, inv, ray.span, hit);
             }
           if (found) break;  // the next slice is farther along this ray
         }
+        if (hit.t != t_before || hit.surface != surface_before) hit.level = L;
       }
     }
   };
@@ -705,6 +765,9 @@ class OctreeCgtRenderer final : public Renderer {
   std::vector<double> iso_;
   std::vector<Vec3s> nodes_at_;  // per depth
   int major_axis_ = 0;           // K, chosen in begin_frame()
+  double eye_k_ = 0;             // the eye's K coordinate, finest voxels
+  std::vector<double> lod_k_;    // per depth: the K distance from which a node is drawn at its own level
+  std::vector<Vec3s> level_dims_;  // per level of detail
 };
 
 }  // namespace
@@ -718,6 +781,8 @@ BackendEntry octree_cgt_backend() {
   e.info.records = {RecordKind::octree_page};
   e.info.modes = {RenderMode::iso};
   e.info.params = octree_cgt_params().declarations();
+  e.info.quality_param = "dpdv";
+  e.info.quality_sweep = {4.0, 2.0, 1.0, 0.5, 0.0};
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
     const OctreeCgtParams op = octree_cgt_params().bind(p);
     if (op.packet & (op.packet - 1))

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <array>
 #include <cstring>
 #include <map>
 #include <set>
@@ -165,6 +166,45 @@ TEST_F(OctreeCgt, EveryOptimisationOnOrOffGivesTheSameImage) {
   // What the switches save is real: culling leaves fewer cells and nodes to visit.
   EXPECT_LT(all_on.counters.cells, all_off.counters.cells);
   EXPECT_LT(all_on.counters.nodes, all_off.counters.nodes);
+}
+
+TEST_F(OctreeCgt, LevelOfDetailTradesErrorForCellsAndBothModesAgree) {
+  const Scene s = scene("ml.store", R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})", 64);
+  const FrameBuffers truth = testing::reference_frame(s);
+  const auto frame = [&](std::map<std::string, double> params, FrameStats* stats = nullptr) {
+    RenderSession session(s, testing::backend_options("octree_cgt", std::move(params)));
+    FrameBuffers fb;
+    const FrameStats st = session.render(0, fb, {.depth = true, .normals = true});
+    if (stats) *stats = st;
+    return fb;
+  };
+  double last_rmse = -1;
+  uint64_t last_cells = 0;
+  for (double dpdv : {0.0, 2.0, 8.0}) {
+    SCOPED_TRACE(dpdv);
+    FrameStats stats;
+    const FrameBuffers fb = frame({{"dpdv", dpdv}}, &stats);
+    ASSERT_TRUE(testing::all_finite(fb));
+    const double rmse = compare_frames(fb, truth, 1.0).rmse;
+    if (dpdv == 0) {
+      EXPECT_EQ(rmse, 0.0);
+    } else {
+      EXPECT_GT(rmse, last_rmse) << "coarser voxels, more error";
+      EXPECT_LT(rmse, dpdv <= 2 ? 0.12 : 0.3) << "Marschner-Lobb's ripples are a voxel or two wide: coarse levels lose them";
+      EXPECT_LT(stats.counters.cells, last_cells) << "and fewer cells";
+    }
+    last_rmse = rmse, last_cells = stats.counters.cells;
+    // The same levels, cells and roots in both modes.
+    const FrameBuffers single = frame({{"dpdv", dpdv}, {"packet", 1}});
+    EXPECT_EQ(std::memcmp(single.color.data(), fb.color.data(), fb.color.size() * sizeof(Rgbaf)), 0);
+  }
+  // show_levels colours hits by level: at dP/dV 8 more than one level is drawn.
+  const FrameBuffers levels = frame({{"dpdv", 8.0}, {"show_levels", 1}});
+  std::set<std::array<float, 3>> colours;
+  for (int y = 0; y < levels.height(); ++y)
+    for (int x = 0; x < levels.width(); ++x)
+      if (levels.color(x, y).a > 0) colours.insert({levels.color(x, y).r, levels.color(x, y).g, levels.color(x, y).b});
+  EXPECT_GE(colours.size(), 2u);
 }
 
 TEST_F(OctreeCgt, ReadsOnlyPagesWhoseRangeHoldsTheIsovalueAndSkipsTheOthersItsRaysCross) {
