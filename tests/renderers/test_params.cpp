@@ -71,7 +71,9 @@ TEST(ParamTable, CountsAndSwitchesRefuseFractionsByName) {
 TEST(ParamTable, EveryBuiltInBackEndDeclaresItsCountsAndSwitchesAsSuch) {
   for (const BackendEntry& e : builtin_backends().entries())
     for (const BackendParam& p : e.info.params)
-      if (p.lo == 0 && p.hi == 1 && p.name != "step") EXPECT_TRUE(p.integer) << e.info.name << "." << p.name;
+      if (p.lo == 0 && p.hi == 1 && p.name != "step") {
+        EXPECT_TRUE(p.integer) << e.info.name << "." << p.name;
+      }
 }
 
 }  // namespace
