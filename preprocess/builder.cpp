@@ -19,6 +19,7 @@
 #include "core/parallel.h"
 #include "core/progress.h"
 #include "core/timing.h"
+#include "preprocess/box_filter.h"
 #include "preprocess/volume_source.h"
 #include "storage/store.h"
 
@@ -161,11 +162,6 @@ struct BuildContext {
   explicit BuildContext(size_t levels) : stats(levels) {}
 };
 
-template <typename T>
-T round_to(double v) {
-  if constexpr (std::is_same_v<T, float>) return static_cast<float>(v);
-  else return static_cast<T>(std::clamp(std::lround(v), 0L, long(std::numeric_limits<T>::max())));
-}
 
 // One level of the pyramid: a ring of slices, row-by-row brick output, and the 2x filter that
 // feeds the next coarser level.
@@ -220,17 +216,7 @@ class Level {
           const int64_t x0 = 2 * i, x1 = std::min(2 * i + 1, dx - 1);
           const T v[8] = {s0[y0 * dx + x0], s0[y0 * dx + x1], s0[y1 * dx + x0], s0[y1 * dx + x1],
                           s1[y0 * dx + x0], s1[y0 * dx + x1], s1[y1 * dx + x0], s1[y1 * dx + x1]};
-          if (mode == Downsample::min) {
-            dst[i] = *std::min_element(v, v + 8);
-          } else if (mode == Downsample::max) {
-            dst[i] = *std::max_element(v, v + 8);
-          } else if constexpr (std::is_same_v<T, float>) {
-            dst[i] = ((v[0] + v[1]) + (v[2] + v[3]) + (v[4] + v[5]) + (v[6] + v[7])) * 0.125f;
-          } else {
-            uint32_t sum = 4;  // round half up
-            for (T x : v) sum += x;
-            dst[i] = static_cast<T>(sum >> 3);
-          }
+          dst[i] = filter_8(v, mode);
         }
       }
     });

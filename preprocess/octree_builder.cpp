@@ -15,17 +15,12 @@
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/progress.h"
+#include "preprocess/box_filter.h"
 #include "preprocess/builder.h"
 #include "storage/store.h"
 
 namespace brickyard {
 namespace {
-
-template <typename T>
-T round_to(double v) {
-  if constexpr (std::is_same_v<T, float>) return static_cast<float>(v);
-  else return static_cast<T>(std::clamp(std::lround(v), 0L, long(std::numeric_limits<T>::max())));
-}
 
 int64_t linear(const Vec3s& c, const Vec3s& n) { return (c.z * n.y + c.y) * n.x + c.x; }
 
@@ -94,7 +89,7 @@ class LevelSource {
                             std::min(2 * z + ((o >> 2) & 1), fd.z - 1)};
               v[o] = f[size_t(linear(c, fd))];
             }
-            a[size_t(linear({x, y, z}, d))] = filter(v);
+            a[size_t(linear({x, y, z}, d))] = filter_8(v, mode_);
           }
     }
   }
@@ -141,17 +136,6 @@ class LevelSource {
   T clamp(T v) const {
     if (!clamp_) return v;
     return round_to<T>(std::clamp(double(v), clamp_->first, clamp_->second));
-  }
-  T filter(const T (&v)[8]) const {
-    if (mode_ == Downsample::min) return *std::min_element(v, v + 8);
-    if (mode_ == Downsample::max) return *std::max_element(v, v + 8);
-    if constexpr (std::is_same_v<T, float>) {
-      return ((v[0] + v[1]) + (v[2] + v[3]) + (v[4] + v[5]) + (v[6] + v[7])) * 0.125f;
-    } else {
-      uint32_t sum = 4;  // round half up, as the grid's build does
-      for (T x : v) sum += x;
-      return static_cast<T>(sum >> 3);
-    }
   }
 
   /// A few decoded bricks, least recently used replaced: cap pages are visited brick by brick.
