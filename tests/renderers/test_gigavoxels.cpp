@@ -25,12 +25,7 @@
 #include "session/render_session.h"
 #include "renderers/common/scene.h"
 #include "renderers/common/shading.h"
-#include "renderers/gigavoxels/cell_groups.h"
-#include "renderers/gigavoxels/corner_lanes.h"
-#include "renderers/gigavoxels/face_lighting.h"
 #include "renderers/gigavoxels/field_bounds.h"
-#include "renderers/gigavoxels/node_tree.h"
-#include "renderers/gigavoxels/preintegrated.h"
 #include "renderers/render_test_util.h"
 #include "test_util.h"
 
@@ -44,11 +39,6 @@ using testing::expect_as_good_as_raymarch;
 using testing::hit_pixels;
 using testing::iso_scene;
 using testing::reference_frame;
-
-using gigavoxels::kNoAddress;
-using gigavoxels::Node;
-using gigavoxels::NodeAddress;
-using gigavoxels::NodeTree;
 
 /// Marschner-Lobb and a sphere's distance, 64^3 f32 in 8^3 bricks (4 levels).
 class GigaVoxels : public ::testing::Test {

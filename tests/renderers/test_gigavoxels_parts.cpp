@@ -7,21 +7,13 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
-#include <memory>
-#include <map>
 #include <random>
 #include <set>
 #include <string>
 
 #include <fmt/format.h>
-#include <tbb/global_control.h>
 
-#include "preprocess/builder.h"
-#include "preprocess/volume_source.h"
 #include "renderers/common/cell_accessor.h"
-#include "renderers/common/metrics.h"
-#include "renderers/common/pixel.h"
-#include "session/render_session.h"
 #include "renderers/common/scene.h"
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/cell_groups.h"
@@ -30,19 +22,9 @@
 #include "renderers/gigavoxels/field_bounds.h"
 #include "renderers/gigavoxels/node_tree.h"
 #include "renderers/gigavoxels/preintegrated.h"
-#include "renderers/render_test_util.h"
-#include "test_util.h"
 
 namespace brickyard {
 namespace {
-
-using testing::all_finite;
-using testing::backend_options;
-using testing::dvr_scene;
-using testing::expect_as_good_as_raymarch;
-using testing::hit_pixels;
-using testing::iso_scene;
-using testing::reference_frame;
 
 using gigavoxels::kNoAddress;
 using gigavoxels::Node;

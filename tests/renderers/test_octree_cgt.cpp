@@ -50,8 +50,9 @@ class OctreeCgt : public ::testing::Test {
 };
 testing::TempDir* OctreeCgt::dir_ = nullptr;
 
-FrameBuffers render(const Scene& s, FrameStats* stats = nullptr) {
-  RenderSession session(s);
+/// A frame of octree_cgt with these parameters (the defaults otherwise), depth and normals too.
+FrameBuffers render(const Scene& s, std::map<std::string, double> params = {}, FrameStats* stats = nullptr) {
+  RenderSession session(s, testing::backend_options("octree_cgt", std::move(params)));
   FrameBuffers fb;
   const FrameStats st = session.render(0, fb, {.depth = true, .normals = true});
   if (stats) *stats = st;
@@ -103,12 +104,7 @@ TEST_F(OctreeCgt, PacketsOfEverySizeHitWhereSingleRaysDoPartialPacketsIncluded) 
   for (const Case& c : {Case{"ml.store", what}, Case{"fbm.store", R"("mode": "iso", "values": "normalized",
                           "isosurfaces": [{"value": 0.45}, {"value": 0.6}])"}}) {
     SCOPED_TRACE(c.store);
-    const auto frame = [&](int packet) {
-      RenderSession session(scene(c.store, c.what, 50, "", 37), testing::backend_options("octree_cgt", {{"packet", double(packet)}}));
-      FrameBuffers fb;
-      session.render(0, fb, {.depth = true, .normals = true});
-      return fb;
-    };
+    const auto frame = [&](int packet) { return render(scene(c.store, c.what, 50, "", 37), {{"packet", double(packet)}}); };
     const FrameBuffers single = frame(1);
     int hits = 0;
     for (int y = 0; y < single.height(); ++y)
@@ -144,11 +140,7 @@ TEST_F(OctreeCgt, EveryOptimisationOnOrOffGivesTheSameImage) {
   const Scene s = scene("fbm.store", R"("mode": "iso", "values": "normalized", "isosurfaces": [{"value": 0.45}, {"value": 0.6}],
       "shading": {"light": "headlight"})", 40);
   const auto frame = [&](std::map<std::string, double> params, FrameStats* stats = nullptr) {
-    RenderSession session(s, testing::backend_options("octree_cgt", std::move(params)));
-    FrameBuffers fb;
-    const FrameStats st = session.render(0, fb, {.depth = true, .normals = true});
-    if (stats) *stats = st;
-    return fb;
+    return render(s, std::move(params), stats);
   };
   FrameStats all_on, all_off;
   const FrameBuffers expected = frame({}, &all_on);
@@ -172,11 +164,7 @@ TEST_F(OctreeCgt, LevelOfDetailTradesErrorForCellsAndBothModesAgree) {
   const Scene s = scene("ml.store", R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})", 64);
   const FrameBuffers truth = testing::reference_frame(s);
   const auto frame = [&](std::map<std::string, double> params, FrameStats* stats = nullptr) {
-    RenderSession session(s, testing::backend_options("octree_cgt", std::move(params)));
-    FrameBuffers fb;
-    const FrameStats st = session.render(0, fb, {.depth = true, .normals = true});
-    if (stats) *stats = st;
-    return fb;
+    return render(s, std::move(params), stats);
   };
   double last_rmse = -1;
   uint64_t last_cells = 0;
@@ -261,7 +249,7 @@ TEST_F(OctreeCgt, AnL1FarBelowTheOctreeGivesTheSameImage) {
   // Four pages of L1 and of L2 for an octree of dozens: tiles re-read what they need.
   const std::string tight = R"("cache": {"l1": ")" + std::to_string(4 * page) + R"(", "l2": ")" + std::to_string(4 * page) + R"("},)";
   FrameStats stats;
-  const FrameBuffers small = render(scene("ml.store", what, 64, tight), &stats);
+  const FrameBuffers small = render(scene("ml.store", what, 64, tight), {}, &stats);
   EXPECT_EQ(std::memcmp(roomy.color.data(), small.color.data(), roomy.color.size() * sizeof(Rgbaf)), 0);
   EXPECT_EQ(std::memcmp(roomy.depth.data(), small.depth.data(), roomy.depth.size() * sizeof(float)), 0);
 }
