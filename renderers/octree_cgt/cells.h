@@ -1,0 +1,197 @@
+#pragma once
+/// @file cells.h
+/// @brief octree_cgt: a leaf node's cells for the lanes that reach it, slice by slice along
+/// K, their corners gathered once, and each cell's trilinear cubic along a ray solved for its
+/// first root. Part of Tracer (tracer.h).
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "renderers/common/cell_accessor.h"
+#include "renderers/common/cubic.h"
+#include "renderers/octree_cgt/tracer.h"
+
+namespace brickyard::octree_cgt {
+
+/// The scalars of the node at depth d and coordinates c (a cap, or a coarser node where the
+/// level of detail stops above the caps).
+template <typename T>
+const OctreeScalars<T>& Tracer<T>::scalars_at(int d, const Vec3s& c) {
+  for (const CapEntry& e : caps)
+    if (e.c == c && e.depth == d && e.generation == pages.generation()) return e.scalars;
+  ++counters.samples;  // a lookup of the octree
+  CapEntry& e = caps[next_cap++ % caps.size()];
+  e.scalars = octree_scalars<T>(r.layout, pages, d, c);
+  e.c = c, e.depth = d, e.generation = pages.generation();
+  return e.scalars;
+}
+
+/// Voxels lo + {0, 1, 2}^3 of the cap n (lo = 2 n.c), x fastest: the cap's own 8 and its
+/// forward neighbours', one lookup per neighbouring cap. Voxels past the volume's last are
+/// never a corner of a cell; they are left at the cap's first.
+template <typename T>
+void Tracer<T>::cap_block(const Node<T>& n, const Vec3s& lo, double block[27]) {
+  const T* own = own_scalars(n);
+  const Vec3s all = r.nodes_at[size_t(n.depth)];
+  for (int nb = 0; nb < 8; ++nb) {
+    const Vec3s off{nb & 1, (nb >> 1) & 1, (nb >> 2) & 1};
+    const Vec3s cc = n.c + off;
+    if (cc.x >= all.x || cc.y >= all.y || cc.z >= all.z) {
+      for (int64_t z = 0; z < 3; ++z)
+        for (int64_t y = 0; y < 3; ++y)
+          for (int64_t x = 0; x < 3; ++x)
+            if ((x == 2) == bool(off.x) && (y == 2) == bool(off.y) && (z == 2) == bool(off.z))
+              block[(z * 3 + y) * 3 + x] = own ? double(own[0]) : n.constant;
+      continue;
+    }
+    const OctreeScalars<T>* other = nb == 0 ? nullptr : &scalars_at(n.depth, cc);
+    for (int64_t z = off.z * 2; z <= (off.z ? 2 : 1); ++z)
+      for (int64_t y = off.y * 2; y <= (off.y ? 2 : 1); ++y)
+        for (int64_t x = off.x * 2; x <= (off.x ? 2 : 1); ++x) {
+          const int octant = int((lo.x + x) & 1) | int(((lo.y + y) & 1) << 1) | int(((lo.z + z) & 1) << 2);
+          block[(z * 3 + y) * 3 + x] = nb == 0 ? (own ? double(own[octant]) : n.constant) : double((*other)[octant]);
+        }
+  }
+}
+
+/// A cap's cells for the packet: each live lane visits only the cells its ray crosses in
+/// each of the cap's slices along K (at most 2 x 2 a slice: K is the major axis), nearer
+/// slice first, and stops at its first hit; a cell's corners are gathered once, for the
+/// first lane that needs them, and shared by the others.
+template <typename T>
+void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V) {
+  // The node's cells at its own level L (0 at the caps): coordinates in level-L voxels, where
+  // voxel i sits at finest coordinate (i + 1/2) 2^L - 1/2; rays keep their parameter t.
+  const int L = r.layout.level_of_depth(n.depth);
+  const double scale = 1.0 / double(int64_t(1) << L);
+  const auto to_level = [&](const Vec3d& x) { return L ? (x + Vec3d(0.5)) * scale - Vec3d(0.5) : x; };
+  const Vec3s dims = r.level_dims[size_t(L)];
+  const Vec3s lo = n.c * int64_t(2);
+  const Vec3s hi{std::min(lo.x + 1, dims.x - 2), std::min(lo.y + 1, dims.y - 2), std::min(lo.z + 1, dims.z - 2)};
+  if (hi.x < lo.x || hi.y < lo.y || hi.z < lo.z) return;
+  const Vec3d o = to_level(p.o);
+  // The cap's voxels and its forward neighbours' (3 x 3 x 3, from up to 8 caps), gathered
+  // once: every cell's corners are read from them.
+  double block[27];
+  if (r.p.slice) cap_block(n, lo, block);
+  double corners[8][8], vlo[8], vhi[8];
+  uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
+  constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
+  for (uint16_t i : lanes) {
+    const PrimaryRay& ray = p.ray[size_t(i)];
+    Hit& hit = p.hit[size_t(i)];
+    const Vec3d org = to_level(ray.org), dir = L ? ray.dir * scale : ray.dir;
+    const Vec3d inv = L ? p.inv[size_t(i)] / scale : p.inv[size_t(i)];
+    const double su = ray.dir[U] * p.inv_dk[size_t(i)], sv = ray.dir[V] * p.inv_dk[size_t(i)];
+    const int surface_before = hit.surface;
+    const double t_before = hit.t;
+    for (int64_t step = 0; step <= hi[K] - lo[K]; ++step) {
+      const int64_t k = p.forward ? lo[K] + step : hi[K] - step;
+      const double s0 = double(k) - o[K], s1 = s0 + 1;
+      const double u0 = o[U] + s0 * su, u1 = o[U] + s1 * su, v0 = o[V] + s0 * sv, v1 = o[V] + s1 * sv;
+      const int64_t a0 = std::max(lo[U], int64_t(std::floor(std::min(u0, u1) - kSlack)));
+      const int64_t a1 = std::min(hi[U], int64_t(std::floor(std::max(u0, u1) + kSlack)));
+      const int64_t b0 = std::max(lo[V], int64_t(std::floor(std::min(v0, v1) - kSlack)));
+      const int64_t b1 = std::min(hi[V], int64_t(std::floor(std::max(v0, v1) + kSlack)));
+      bool found = false;
+      for (int64_t a = a0; a <= a1; ++a)
+        for (int64_t b = b0; b <= b1; ++b) {
+          Vec3s cell;
+          cell[K] = k, cell[U] = a, cell[V] = b;
+          const int local = int(cell.x - lo.x) | int((cell.y - lo.y) << 1) | int((cell.z - lo.z) << 2);
+          if (state[local] == 0 && !r.p.slice) {
+            cell_corners(cell, n, own_scalars(n), corners[local], vlo[local], vhi[local]);
+            state[local] = crosses_corners(vlo[local], vhi[local]) ? 1 : 2;
+          }
+          if (state[local] == 0) {
+            double& l = vlo[local] = std::numeric_limits<double>::max();
+            double& h = vhi[local] = std::numeric_limits<double>::lowest();
+            const Vec3s q = cell - lo;
+            for (int m = 0; m < 8; ++m) {
+              const double v = block[((q.z + ((m >> 2) & 1)) * 3 + q.y + ((m >> 1) & 1)) * 3 + q.x + (m & 1)];
+              corners[local][m] = v, l = std::min(l, v), h = std::max(h, v);
+            }
+            state[local] = crosses_corners(l, h) ? 1 : 2;
+          }
+          if (state[local] == 2) continue;
+          found |= intersect(cell, corners[local], vlo[local], vhi[local], org, dir, inv, ray.span, hit);
+        }
+      if (found) break;  // the next slice is farther along this ray
+    }
+    if (hit.t != t_before || hit.surface != surface_before) hit.level = L;
+  }
+}
+
+/// The cells of a leaf node for one ray: the packets' cell code with one lane, K the ray's
+/// own major axis (never parallel to its slices).
+template <typename T>
+void Tracer<T>::single_cells(const Node<T>& n, const Vec3d& o, const Vec3d& d, Interval<double> span, Hit& best) {
+  if (!single) single = std::make_unique<Packet>();
+  Packet& p = *single;
+  const int K = std::abs(d.x) >= std::abs(d.y) && std::abs(d.x) >= std::abs(d.z) ? 0 : std::abs(d.y) >= std::abs(d.z) ? 1 : 2;
+  p.lanes = 1;
+  p.ray[0].org = o, p.ray[0].dir = d, p.ray[0].span = span;
+  p.inv[0] = {1.0 / d.x, 1.0 / d.y, 1.0 / d.z};
+  p.inv_dk[0] = 1.0 / d[K];
+  p.o = o;
+  p.forward = d[K] > 0;
+  p.hit[0] = best;
+  const std::vector<uint16_t> lane{0};
+  packet_cells(p, n, lane, K, (K + 1) % 3, (K + 2) % 3);
+  best = p.hit[0];
+}
+
+/// Voxel v of the level node n holds (its own scalars, or a neighbour's at n's depth).
+template <typename T>
+double Tracer<T>::corner(const Vec3s& v, const Node<T>& n, const T* own) {
+  const int octant = int(v.x & 1) | int((v.y & 1) << 1) | int((v.z & 1) << 2);
+  if (v.x >> 1 == n.c.x && v.y >> 1 == n.c.y && v.z >> 1 == n.c.z) return n.consolidated ? n.constant : double(own[octant]);
+  return double(scalars_at(n.depth, {v.x >> 1, v.y >> 1, v.z >> 1})[octant]);
+}
+
+/// A cell's 8 corners (index dx + 2 dy + 4 dz) and their range.
+template <typename T>
+void Tracer<T>::cell_corners(const Vec3s& cell, const Node<T>& n, const T* cap, double c[8], double& lo, double& hi) {
+  lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
+  for (int k = 0; k < 8; ++k) {
+    c[k] = corner({cell.x + (k & 1), cell.y + ((k >> 1) & 1), cell.z + ((k >> 2) & 1)}, n, cap);
+    lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
+  }
+}
+
+/// One ray against one cell of corners c: the first root of each isosurface's cubic.
+template <typename T>
+bool Tracer<T>::intersect(const Vec3s& cell, const double c[8], double lo, double hi, const Vec3d& o, const Vec3d& d,
+               const Vec3d& inv, Interval<double> s, Hit& best) {
+  Interval<double> cs = s;
+  for (int a = 0; a < 3; ++a) {
+    double t0 = (double(cell[a]) - o[a]) * inv[a], t1 = (double(cell[a] + 1) - o[a]) * inv[a];
+    if (t0 > t1) std::swap(t0, t1);
+    if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();
+    if (std::isnan(t1)) t1 = std::numeric_limits<double>::infinity();
+    cs.t0 = std::max(cs.t0, t0), cs.t1 = std::min(cs.t1, t1);
+  }
+  if (cs.t0 > cs.t1 || cs.t0 >= best.t) return false;
+  ++counters.cells;
+  bool found = false;
+  for (size_t i = 0; i < r.iso.size(); ++i) {
+    const double iso = r.iso[i];
+    if (r.p.cell && (iso < lo || iso > hi)) continue;
+    const Vec3d p0 = o + d * cs.t0;
+    const double u0[3] = {p0.x - double(cell.x), p0.y - double(cell.y), p0.z - double(cell.z)};
+    const double du[3] = {d.x, d.y, d.z};
+    const Cubic g = trilinear_cubic(c, iso, u0, du);
+    const auto root = first_root(g, cs.t1 - cs.t0, r.p.root_tolerance);
+    if (!root) continue;
+    const double t = cs.t0 + *root;
+    if (t >= best.t) continue;
+    best.t = t, best.surface = int(i), found = true;
+    const Vec3d u{u0[0] + du[0] * *root, u0[1] + du[1] * *root, u0[2] + du[2] * *root};
+    best.normal_voxel = trilinear_gradient(c, u.x, u.y, u.z);
+  }
+  return found;
+}
+
+}  // namespace brickyard::octree_cgt

@@ -1,0 +1,113 @@
+// octree_cgt's single-ray mode, which the paper measures the coherent one against: a
+// front-to-back descent of the octree per ray, children in entry order, down to the leaves
+// whose cells cells.h solves; and the shading of a hit, for both modes.
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include "renderers/octree_cgt/cells.h"
+#include "renderers/octree_cgt/nodes.h"
+#include "renderers/octree_cgt/tracer.h"
+
+namespace brickyard::octree_cgt {
+namespace {
+
+/// Orders a few entries by their first member (ray entry), in place.
+template <typename E, size_t N>
+void sort_by_entry(std::array<E, N>& a, int count) {
+  for (int i = 1; i < count; ++i)
+    for (int j = i; j > 0 && a[size_t(j)].first < a[size_t(j - 1)].first; --j) std::swap(a[size_t(j)], a[size_t(j - 1)]);
+}
+
+}  // namespace
+
+template <typename T>
+void Tracer<T>::pixel(int x, int y, FrameBuffers& out) {
+  ++counters.rays;
+  pages.begin_ray();
+  const PrimaryRay ray = primary_ray(rays, r.geo, x, y);
+  PixelResult px;
+  px.color = r.scene.background;
+  if (ray.hits()) {
+    const Hit h = trace(ray.org, ray.dir, ray.span);
+    if (h.surface >= 0) shade(ray, h, px);
+  }
+  write_pixel(out, x, y, px);
+}
+
+template <typename T>
+void Tracer<T>::shade(const PrimaryRay& ray, const Hit& h, PixelResult& px) {
+  px.depth = h.t;
+  px.alpha = 1;
+  px.color = r.scene.isosurfaces[size_t(h.surface)].color;
+  if (r.p.show_levels) {
+    static const Vec3f kLevels[] = {{0.9f, 0.9f, 0.9f}, {0.2f, 0.6f, 1.0f}, {0.3f, 0.9f, 0.3f},
+                                    {1.0f, 0.8f, 0.2f}, {1.0f, 0.4f, 0.2f}, {0.9f, 0.2f, 0.8f}};
+    px.color = kLevels[std::min<size_t>(size_t(h.level), std::size(kLevels) - 1)];
+  }
+  if (!r.ctx.needs_gradients(setup.outputs)) return;
+  ++counters.gradients;
+  const Vec3d n = facing_normal(h.normal_voxel / r.geo.spacing, ray.world.dir);
+  if (setup.outputs.normals) px.normal = n;
+  if (!r.shading.lit()) return;
+  double light_distance;
+  const Vec3d l = r.shading.to_light_along(ray.world, h.t, light_distance);
+  px.color = r.shading.shade(px.color, n, -ray.world.dir, l, false);
+}
+
+/// Front-to-back descent from the root over [span.t0, span.t1].
+template <typename T>
+Hit Tracer<T>::trace(const Vec3d& o, const Vec3d& d, Interval<double> span) {
+  Hit best;
+  const Vec3d inv{1.0 / d.x, 1.0 / d.y, 1.0 / d.z};
+  descend(root(), o, d, inv, span, best);
+  return best;
+}
+
+/// Returns true when the ray is done (a hit before anything later can be).
+template <typename T>
+bool Tracer<T>::descend(const Node<T>& n, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> span, Hit& best) {
+  ++counters.nodes;
+  const Interval<double> s = node_span(n, o, inv, span);
+  if (s.t0 > s.t1 || s.t0 >= best.t) return false;
+  if (!crosses(n.min, n.max)) return false;
+  if (n.unread_page) {
+    Node<T> read = n;
+    read.page = page(n.unread_page);
+    read.unread_page = 0;
+    return descend(read, o, d, inv, span, best);
+  }
+  if (lod_leaf(n)) {
+    single_cells(n, o, d, span, best);
+    return best.surface >= 0;
+  }
+  // Children front to back: order by where the ray enters each.
+  std::array<std::pair<double, int>, 8> order;
+  int count = 0;
+  for (int oct = 0; oct < 8; ++oct) {
+    Node<T> c = child(n, oct);
+    if (c.depth < 0) continue;
+    const Interval<double> cs = node_span(c, o, inv, s);
+    if (cs.t0 > cs.t1) continue;
+    order[size_t(count++)] = {cs.t0, oct};
+  }
+  sort_by_entry(order, count);
+  for (int i = 0; i < count; ++i) {
+    if (order[size_t(i)].first >= best.t) break;
+    // No return at a child's hit: with levels of detail a coarser neighbour's cells reach
+    // past its region, so a later sibling entered before the hit may hold a nearer one.
+    descend(child(n, order[size_t(i)].second), o, d, inv, s, best);
+  }
+  return false;
+}
+
+#define BRICKYARD_OCTREE_CGT_DESCENT(V)                                                       \
+  template void Tracer<V>::pixel(int, int, FrameBuffers&);                                    \
+  template void Tracer<V>::shade(const PrimaryRay&, const Hit&, PixelResult&);                \
+  template Hit Tracer<V>::trace(const Vec3d&, const Vec3d&, Interval<double>);
+BRICKYARD_OCTREE_CGT_FOR_VOXELS(BRICKYARD_OCTREE_CGT_DESCENT)
+#undef BRICKYARD_OCTREE_CGT_DESCENT
+
+}  // namespace brickyard::octree_cgt

@@ -1,0 +1,161 @@
+// octree_cgt's packets: a square of rays descends the octree's implicit macrocells once,
+// nearer half along the frame's major axis K first, culled by the packet's frustum over K and
+// by node ranges; each node keeps the lanes whose ray crosses it before their hit so far, and
+// the leaves' cells are solved for those lanes (cells.h).
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "renderers/octree_cgt/cells.h"
+#include "renderers/octree_cgt/nodes.h"
+#include "renderers/octree_cgt/tracer.h"
+
+namespace brickyard::octree_cgt {
+
+/// The lanes of `from` whose ray crosses box b before its hit so far, into `to`.
+template <typename T>
+void Tracer<T>::lanes_through(const Packet& p, const Box3d& b, const std::vector<uint16_t>& from, std::vector<uint16_t>& to) const {
+  to.clear();
+  for (uint16_t i : from) {
+    const PrimaryRay& ray = p.ray[i];
+    const Vec3d& inv = p.inv[i];
+    double t0 = ray.span.t0, t1 = std::min(ray.span.t1, p.hit[i].t);
+    for (int a = 0; a < 3; ++a) {
+      double ta = (b.lo[a] - ray.org[a]) * inv[a], tb = (b.hi[a] - ray.org[a]) * inv[a];
+      if (ta > tb) std::swap(ta, tb);
+      if (std::isnan(ta)) ta = -std::numeric_limits<double>::infinity();
+      if (std::isnan(tb)) tb = std::numeric_limits<double>::infinity();
+      t0 = std::max(t0, ta), t1 = std::min(t1, tb);
+    }
+    if (t0 <= t1) to.push_back(i);
+  }
+}
+
+template <typename T>
+void Tracer<T>::render_packets(const Tile& tile, int size, FrameBuffers& out) {
+  if (!packet) packet = std::make_unique<Packet>();
+  for (int y0 = tile.y0; y0 < tile.y1; y0 += size)
+    for (int x0 = tile.x0; x0 < tile.x1; x0 += size) {
+      // A partial packet at the image's border holds only the pixels that are there.
+      Packet& p = *packet;
+      p.lanes = 0;
+      for (int y = y0; y < std::min(y0 + size, tile.y1); ++y)
+        for (int x = x0; x < std::min(x0 + size, tile.x1); ++x) {
+          const int i = p.lanes++;
+          p.px[size_t(i)] = x, p.py[size_t(i)] = y;
+          p.ray[size_t(i)] = primary_ray(rays, r.geo, x, y);
+          p.hit[size_t(i)] = Hit{};
+        }
+      counters.rays += uint64_t(p.lanes);
+      pages.begin_ray();
+      trace_packet(p);
+      for (int i = 0; i < p.lanes; ++i) {
+        PixelResult px;
+        px.color = r.scene.background;
+        if (p.hit[size_t(i)].surface >= 0) shade(p.ray[size_t(i)], p.hit[size_t(i)], px);
+        write_pixel(out, p.px[size_t(i)], p.py[size_t(i)], px);
+      }
+    }
+}
+
+template <typename T>
+void Tracer<T>::trace_packet(Packet& p) {
+  const int K = r.major_axis, U = (K + 1) % 3, V = (K + 2) % 3;
+  int live = 0, forward = 0;
+  p.su_lo = p.sv_lo = std::numeric_limits<double>::infinity();
+  p.su_hi = p.sv_hi = -std::numeric_limits<double>::infinity();
+  for (int i = 0; i < p.lanes; ++i) {
+    const PrimaryRay& ray = p.ray[size_t(i)];
+    p.live[size_t(i)] = ray.hits();
+    if (!ray.hits()) continue;
+    p.o = ray.org;  // one eye: every lane starts there
+    ++live;
+    const double dk = ray.dir[K];
+    forward += dk > 0;
+    p.inv_dk[size_t(i)] = 1.0 / dk;
+    p.inv[size_t(i)] = {1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z};
+    const double su = ray.dir[U] / dk, sv = ray.dir[V] / dk;
+    p.su_lo = std::min(p.su_lo, su), p.su_hi = std::max(p.su_hi, su);
+    p.sv_lo = std::min(p.sv_lo, sv), p.sv_hi = std::max(p.sv_hi, sv);
+  }
+  if (live == 0) return;
+  // Rays that do not all head one way along K (or run parallel to its slices) have no
+  // bounding frustum over K: each goes alone.
+  const bool coherent = (forward == live || forward == 0) && std::isfinite(p.su_lo + p.su_hi + p.sv_lo + p.sv_hi);
+  if (!coherent) {
+    ++counters.nodes;  // counted as the packet's one test
+    for (int i = 0; i < p.lanes; ++i)
+      if (p.live[size_t(i)]) p.hit[size_t(i)] = trace(p.ray[size_t(i)].org, p.ray[size_t(i)].dir, p.ray[size_t(i)].span);
+    return;
+  }
+  p.forward = forward == live;
+  if (lanes_at.size() < size_t(r.layout.depth) + 1) {
+    lanes_at.resize(size_t(r.layout.depth) + 1);
+    for (auto& l : lanes_at) l.reserve(kMaxLanes);
+  }
+  std::vector<uint16_t>& all = lanes_at[0];
+  all.clear();
+  for (int i = 0; i < p.lanes; ++i)
+    if (p.live[size_t(i)]) all.push_back(uint16_t(i));
+  descend_packet(p, root(), all, K, U, V);
+}
+
+/// Whether the packet's frustum meets the box [lo, hi] (finest voxel coordinates): one test
+/// for every lane, before each lane's own.
+template <typename T>
+bool Tracer<T>::packet_meets(const Packet& p, const Vec3d& lo, const Vec3d& hi, int K, int U, int V) const {
+  double k0 = lo[K], k1 = hi[K];
+  if (p.forward) k0 = std::max(k0, p.o[K]);
+  else k1 = std::min(k1, p.o[K]);
+  if (k0 > k1) return false;
+  const double s0 = k0 - p.o[K], s1 = k1 - p.o[K];
+  const double u_lo = p.o[U] + std::min({s0 * p.su_lo, s0 * p.su_hi, s1 * p.su_lo, s1 * p.su_hi});
+  const double u_hi = p.o[U] + std::max({s0 * p.su_lo, s0 * p.su_hi, s1 * p.su_lo, s1 * p.su_hi});
+  if (u_hi < lo[U] || u_lo > hi[U]) return false;
+  const double v_lo = p.o[V] + std::min({s0 * p.sv_lo, s0 * p.sv_hi, s1 * p.sv_lo, s1 * p.sv_hi});
+  const double v_hi = p.o[V] + std::max({s0 * p.sv_lo, s0 * p.sv_hi, s1 * p.sv_lo, s1 * p.sv_hi});
+  if (v_hi < lo[V] || v_lo > hi[V]) return false;
+  return true;
+}
+
+template <typename T>
+void Tracer<T>::descend_packet(Packet& p, const Node<T>& n, const std::vector<uint16_t>& parent_lanes, int K, int U, int V) {
+  ++counters.nodes;
+  if (!crosses(n.min, n.max)) return;
+  const Box3d box = node_box(n);
+  if (!packet_meets(p, box.lo, box.hi, K, U, V)) return;
+  std::vector<uint16_t>& lanes = lanes_at[size_t(n.depth) + 1];
+  lanes_through(p, box, parent_lanes, lanes);
+  if (lanes.empty()) return;
+  if (n.unread_page) {
+    Node<T> read = n;
+    read.page = page(n.unread_page);
+    read.unread_page = 0;
+    lod_leaf(read) ? packet_cells(p, read, lanes, K, U, V) : descend_children(p, read, lanes, K, U, V);
+    return;
+  }
+  if (lod_leaf(n)) return packet_cells(p, n, lanes, K, U, V);
+  descend_children(p, n, lanes, K, U, V);
+}
+
+template <typename T>
+void Tracer<T>::descend_children(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V) {
+  // The half of the children nearer along K first: a lane's hit there is nearer than any
+  // in the far half; within a half, each lane keeps its nearest.
+  const int near = p.forward ? 0 : 1;
+  for (int half : {near, 1 - near})
+    for (int oct = 0; oct < 8; ++oct) {
+      if (((oct >> K) & 1) != half) continue;
+      const Node<T> c = child(n, oct);
+      if (c.depth >= 0) descend_packet(p, c, lanes, K, U, V);
+    }
+}
+
+#define BRICKYARD_OCTREE_CGT_PACKETS(V) template void Tracer<V>::render_packets(const Tile&, int, FrameBuffers&);
+BRICKYARD_OCTREE_CGT_FOR_VOXELS(BRICKYARD_OCTREE_CGT_PACKETS)
+#undef BRICKYARD_OCTREE_CGT_PACKETS
+
+}  // namespace brickyard::octree_cgt

@@ -1,0 +1,153 @@
+#pragma once
+/// @file tracer.h
+/// @brief octree_cgt's traversal state for one tile: the pages it holds, the caps near its
+/// rays, its packet; the members are defined by part (see renderer.h).
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "dataset/octree_walk.h"
+#include "renderers/common/frame.h"
+#include "renderers/common/pixel.h"
+#include "renderers/octree_cgt/page_memo.h"
+#include "renderers/octree_cgt/renderer.h"
+
+namespace brickyard::octree_cgt {
+
+struct Hit {
+  double t = std::numeric_limits<double>::infinity();
+  int surface = -1;
+  int level = 0;            // the level of detail of the cell it was found in (0: finest)
+  Vec3d normal_voxel{0.0};  // gradient of the interpolant, voxel coordinates
+};
+
+/// A node on the way down: where it is, and where its record is (null for a node inside a
+/// consolidated subtree, which has none: its value is `constant`).
+template <typename T>
+struct Node {
+  int depth = 0;
+  Vec3s c{0};
+  const OctreePage<T>* page = nullptr;
+  int level = 0;
+  uint32_t index = 0;
+  bool consolidated = false;
+  double constant = 0;
+  float min = 0, max = 0;
+  uint64_t unread_page = 0;  // the page rooted here, fetched only once the ray needs it (0: read)
+  Vec3s forward_end{0};      // for consolidated nodes: the end (finest voxels) of the subtree that is one value
+
+  static Node none() {
+    Node n;
+    n.depth = -1;
+    return n;
+  }
+};
+
+constexpr int kMaxLanes = 16 * 16;
+
+/// Rays of one packet, structure of arrays; lanes outside the volume start done.
+struct Packet {
+  int lanes = 0;
+  std::array<int, kMaxLanes> px{}, py{};
+  std::array<PrimaryRay, kMaxLanes> ray{};
+  std::array<Hit, kMaxLanes> hit{};
+  std::array<double, kMaxLanes> inv_dk{};
+  std::array<Vec3d, kMaxLanes> inv{};
+  std::array<uint8_t, kMaxLanes> live{};
+  Vec3d o{0.0};
+  double su_lo = 0, su_hi = 0, sv_lo = 0, sv_hi = 0;  // slopes du/dK, dv/dK over the live lanes
+  bool forward = true;                                // the live lanes' d_K > 0
+};
+
+template <typename T>
+struct Tracer {
+  const Shared& r;
+  const FrameSetup& setup;
+  const ImageRays rays;
+  RayCounters& counters;
+  PageMemo<T> pages;
+
+  Tracer(const Shared& shared, const FrameSetup& s, RayCounters& c)
+      : r(shared), setup(s), rays(s.camera, s.width, s.height), counters(c),
+        pages(r.ctx.pages(), r.layout, size_t(r.p.pinned_pages), c) {}
+
+  const OctreePage<T>* page(uint64_t id) { return pages.page(id); }
+
+  /// Width in finest voxels of a node at depth d.
+  int64_t width(int d) const { return int64_t(1) << (r.layout.depth - d); }
+
+  /// Whether a node's (or page's) range holds an isovalue; always, without macrocell culling.
+  bool crosses(float lo, float hi) const {
+    if (!r.p.mcell) return true;
+    for (double iso : r.iso)
+      if (iso >= lo && iso <= hi) return true;
+    return false;
+  }
+
+  /// Whether a cell's corner range holds an isovalue; always, without cell culling.
+  bool crosses_corners(double lo, double hi) const {
+    if (!r.p.cell) return true;
+    for (double iso : r.iso)
+      if (iso >= lo && iso <= hi) return true;
+    return false;
+  }
+
+  /// A node's own 8 scalars (null for one inside a consolidated subtree: its value is n.constant).
+  const T* own_scalars(const Node<T>& n) const {
+    if (n.consolidated) return nullptr;
+    return n.depth == r.layout.cap_depth() ? n.page->cap_scalars(n.index) : n.page->node_scalars(n.level, n.index);
+  }
+
+  // --- The octree's nodes on the way down (nodes.h) ---
+  bool lod_leaf(const Node<T>& n) const;
+  double lod_reach(const Node<T>& n) const;
+  Interval<double> node_span(const Node<T>& n, const Vec3d& o, const Vec3d& inv, Interval<double> span) const;
+  Box3d node_box(const Node<T>& n) const;
+  Node<T> root();
+  Node<T> child(const Node<T>& n, int oct);
+
+  // --- A leaf's cells (cells.h) ---
+  /// Caps near the ray, found by descent once each: a cell's corners lie in up to 8 caps,
+  /// and the next cells along the ray share most of them.
+  struct CapEntry {
+    int depth = -1;
+    Vec3s c{-1};
+    uint64_t generation = ~uint64_t(0);
+    OctreeScalars<T> scalars;
+  };
+  std::array<CapEntry, 16> caps{};
+  size_t next_cap = 0;
+  const OctreeScalars<T>& scalars_at(int d, const Vec3s& c);
+  void cap_block(const Node<T>& n, const Vec3s& lo, double block[27]);
+  void packet_cells(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V);
+  void single_cells(const Node<T>& n, const Vec3d& o, const Vec3d& d, Interval<double> span, Hit& best);
+  double corner(const Vec3s& v, const Node<T>& n, const T* own);
+  void cell_corners(const Vec3s& cell, const Node<T>& n, const T* cap, double c[8], double& lo, double& hi);
+  bool intersect(const Vec3s& cell, const double c[8], double lo, double hi, const Vec3d& o, const Vec3d& d,
+                 const Vec3d& inv, Interval<double> s, Hit& best);
+
+  // --- Single rays and shading (descent.cpp) ---
+  void pixel(int x, int y, FrameBuffers& out);
+  void shade(const PrimaryRay& ray, const Hit& h, PixelResult& px);
+  Hit trace(const Vec3d& o, const Vec3d& d, Interval<double> span);
+  bool descend(const Node<T>& n, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> span, Hit& best);
+
+  // --- Packets (packets.cpp) ---
+  std::unique_ptr<Packet> packet;
+  std::unique_ptr<Packet> single;  // the one lane of single_cells()
+  /// Per depth, the lanes whose rays still cross the node being visited there and can still
+  /// find a nearer hit in it: a node tests only its parent's lanes.
+  std::vector<std::vector<uint16_t>> lanes_at;
+  void render_packets(const Tile& tile, int size, FrameBuffers& out);
+  void trace_packet(Packet& p);
+  void lanes_through(const Packet& p, const Box3d& b, const std::vector<uint16_t>& from, std::vector<uint16_t>& to) const;
+  bool packet_meets(const Packet& p, const Vec3d& lo, const Vec3d& hi, int K, int U, int V) const;
+  void descend_packet(Packet& p, const Node<T>& n, const std::vector<uint16_t>& parent_lanes, int K, int U, int V);
+  void descend_children(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V);
+};
+
+}  // namespace brickyard::octree_cgt
