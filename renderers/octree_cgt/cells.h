@@ -61,7 +61,7 @@ void Tracer<T>::cap_block(const Node<T>& n, const Vec3s& lo, double block[27]) {
 /// slice first, and stops at its first hit; a cell's corners are gathered once, for the
 /// first lane that needs them, and shared by the others.
 template <typename T>
-void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V) {
+void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V) {
   // The node's cells at its own level L (0 at the caps): coordinates in level-L voxels, where
   // voxel i sits at finest coordinate (i + 1/2) 2^L - 1/2; rays keep their parameter t.
   const int L = r.layout.level_of_depth(n.depth);
@@ -79,7 +79,7 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const std::vector<uint
   double corners[8][8], vlo[8], vhi[8];
   uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
   constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
-  for (uint16_t i : lanes) {
+  lanes.for_each([&](int i) {
     const PrimaryRay& ray = p.ray[size_t(i)];
     Hit& hit = p.hit[size_t(i)];
     const Vec3d org = to_level(ray.org), dir = L ? ray.dir * scale : ray.dir;
@@ -120,8 +120,8 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const std::vector<uint
         }
       if (found) break;  // the next slice is farther along this ray
     }
-    if (hit.t != t_before || hit.surface != surface_before) hit.level = L;
-  }
+    if (hit.t != t_before || hit.surface != surface_before) hit.level = L, p.update_exit(i);
+  });
 }
 
 /// The cells of a leaf node for one ray: the packets' cell code with one lane, K the ray's
@@ -138,7 +138,8 @@ void Tracer<T>::single_cells(const Node<T>& n, const Vec3d& o, const Vec3d& d, I
   p.o = o;
   p.forward = d[K] > 0;
   p.hit[0] = best;
-  const std::vector<uint16_t> lane{0};
+  LaneSet lane;
+  lane.set(0);
   packet_cells(p, n, lane, K, (K + 1) % 3, (K + 2) % 3);
   best = p.hit[0];
 }

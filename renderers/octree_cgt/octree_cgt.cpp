@@ -18,6 +18,8 @@ const ParamTable<Params>& params_table() {
   static const ParamTable<Params> table{
       {"packet", &Params::packet, 8, 1, 16,
        "packets of packet x packet rays traverse the octree together (2, 4, 8 or 16); 1: single-ray mode"},
+      {"packlet", &Params::packlet, 0, 0, 16,
+       "packets' lanes are tested together in packlets of this many SIMD lanes (4, 8 or 16); 0: the build's width"},
       {"mcell", &Params::mcell, 1, 0, 1, "1: skip octree nodes and pages whose range holds no isovalue; 0: visit them (Table II)"},
       {"cell", &Params::cell, 1, 0, 1, "1: skip cells whose corners' range holds no isovalue; 0: solve every cell's cubic"},
       {"slice", &Params::slice, 1, 0, 1,
@@ -53,6 +55,7 @@ void Shared::plan_frame(const FrameSetup& setup) {
   // level-L voxels from K distance lod_k[d] on, where one of them covers dpdv pixels. A pixel
   // covers z * pixel_angle of world at view depth z, and a slice k voxels away along K lies at
   // z = k * spacing_K / |forward_K|.
+  packlet_lanes = p.packlet ? p.packlet : kBuildPackletLanes;
   const int K = major_axis;
   eye_k = geo.to_voxel(setup.camera.eye)[K];
   const double pixel_angle = 2.0 * std::tan(setup.camera.fov_degrees * M_PI / 360.0) / double(std::max(setup.height, 1));
@@ -103,6 +106,8 @@ BackendEntry octree_cgt_backend() {
     const octree_cgt::Params op = octree_cgt::params_table().bind(p);
     if (op.packet & (op.packet - 1))
       throw Error(Errc::invalid_argument, fmt::format("packet {} is not 1, 2, 4, 8 or 16", op.packet)).with_field("packet");
+    if (op.packlet != 0 && op.packlet != 4 && op.packlet != 8 && op.packlet != 16)
+      throw Error(Errc::invalid_argument, fmt::format("packlet {} is not 0, 4, 8 or 16", op.packlet)).with_field("packlet");
     return dispatch_value_type(ctx.octree().layout().type, [&](auto stored) -> std::unique_ptr<Renderer> {
       return std::make_unique<octree_cgt::OctreeCgtRenderer<decltype(stored)>>(ctx, op);
     });

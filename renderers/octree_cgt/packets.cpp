@@ -15,23 +15,62 @@
 
 namespace brickyard::octree_cgt {
 
-/// The lanes of `from` whose ray crosses box b before its hit so far, into `to`.
-template <typename T>
-void Tracer<T>::lanes_through(const Packet& p, const Box3d& b, const std::vector<uint16_t>& from, std::vector<uint16_t>& to) const {
-  to.clear();
-  for (uint16_t i : from) {
-    const PrimaryRay& ray = p.ray[i];
-    const Vec3d& inv = p.inv[i];
-    double t0 = ray.span.t0, t1 = std::min(ray.span.t1, p.hit[i].t);
-    for (int a = 0; a < 3; ++a) {
-      double ta = (b.lo[a] - ray.org[a]) * inv[a], tb = (b.hi[a] - ray.org[a]) * inv[a];
-      if (ta > tb) std::swap(ta, tb);
-      if (std::isnan(ta)) ta = -std::numeric_limits<double>::infinity();
-      if (std::isnan(tb)) tb = std::numeric_limits<double>::infinity();
-      t0 = std::max(t0, ta), t1 = std::min(t1, tb);
-    }
-    if (t0 <= t1) to.push_back(i);
+namespace {
+
+/// Which of the W lanes from `base` on cross the box [lo, hi] (relative to the packet's eye)
+/// within their [t_enter, t_exit]: bit j for lane base + j. One SIMD pass over the packlet.
+template <int W>
+uint32_t packlet_through(const Packet& p, int base, const float lo[3], const float hi[3]) {
+  const float* ix = p.finv[0].data() + base;
+  const float* iy = p.finv[1].data() + base;
+  const float* iz = p.finv[2].data() + base;
+  const float* enter = p.t_enter.data() + base;
+  const float* exit = p.t_exit.data() + base;
+  int32_t ok[W];
+  for (int j = 0; j < W; ++j) {
+    const float ax = lo[0] * ix[j], bx = hi[0] * ix[j];
+    const float ay = lo[1] * iy[j], by = hi[1] * iy[j];
+    const float az = lo[2] * iz[j], bz = hi[2] * iz[j];
+    const float t0 = std::max(std::max(enter[j], std::min(ax, bx)), std::max(std::min(ay, by), std::min(az, bz)));
+    const float t1 = std::min(std::min(exit[j], std::max(ax, bx)), std::min(std::max(ay, by), std::max(az, bz)));
+    ok[j] = t0 <= t1 ? 1 : 0;
   }
+  uint32_t bits = 0;
+  for (int j = 0; j < W; ++j) bits |= uint32_t(ok[j]) << j;
+  return bits;
+}
+
+}  // namespace
+
+/// The lanes of `from` whose ray crosses box b before its hit so far, into `to`; whether any
+/// does. Packlet by packlet, skipping those with no lane of `from`. In float: the box is
+/// widened by more than float's rounding, so no lane that crosses it is lost (a lane let
+/// through in excess finds nothing in the cells, which are solved in double).
+template <typename T>
+template <int W>
+bool Tracer<T>::lanes_through(const Packet& p, const Box3d& b, const LaneSet& from, LaneSet& to) const {
+  float lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    const double l = b.lo[a] - p.o[a], h = b.hi[a] - p.o[a];
+    const double margin = 1e-4 + 1e-6 * std::max(std::abs(l), std::abs(h));
+    lo[a] = float(l - margin), hi[a] = float(h + margin);
+  }
+  constexpr uint64_t kPackletBits = W == 64 ? ~uint64_t(0) : (uint64_t(1) << W) - 1;
+  bool any = false;
+  const size_t words = size_t(p.lanes + 63) / 64;
+  for (size_t w = 0; w < words; ++w) {
+    const uint64_t in = from.words[w];
+    uint64_t out = 0;
+    for (int q = 0; q < 64 / W; ++q) {
+      const uint64_t mask = (in >> (q * W)) & kPackletBits;
+      if (!mask) continue;
+      out |= (uint64_t(packlet_through<W>(p, int(w) * 64 + q * W, lo, hi)) & mask) << (q * W);
+    }
+    to.words[w] = out;
+    any |= out != 0;
+  }
+  for (size_t w = words; w < to.words.size(); ++w) to.words[w] = 0;
+  return any;
 }
 
 template <typename T>
@@ -51,7 +90,11 @@ void Tracer<T>::render_packets(const Tile& tile, int size, FrameBuffers& out) {
         }
       counters.rays += uint64_t(p.lanes);
       pages.begin_ray();
-      trace_packet(p);
+      switch (r.packlet_lanes) {
+        case 4: trace_packet<4>(p); break;
+        case 8: trace_packet<8>(p); break;
+        default: trace_packet<16>(p); break;
+      }
       for (int i = 0; i < p.lanes; ++i) {
         PixelResult px;
         px.color = r.scene.background;
@@ -62,6 +105,7 @@ void Tracer<T>::render_packets(const Tile& tile, int size, FrameBuffers& out) {
 }
 
 template <typename T>
+template <int W>
 void Tracer<T>::trace_packet(Packet& p) {
   const int K = r.major_axis, U = (K + 1) % 3, V = (K + 2) % 3;
   int live = 0, forward = 0;
@@ -70,6 +114,8 @@ void Tracer<T>::trace_packet(Packet& p) {
   for (int i = 0; i < p.lanes; ++i) {
     const PrimaryRay& ray = p.ray[size_t(i)];
     p.live[size_t(i)] = ray.hits();
+    p.t_enter[size_t(i)] = std::numeric_limits<float>::infinity();  // in no box
+    p.t_exit[size_t(i)] = -std::numeric_limits<float>::infinity();
     if (!ray.hits()) continue;
     p.o = ray.org;  // one eye: every lane starts there
     ++live;
@@ -77,6 +123,9 @@ void Tracer<T>::trace_packet(Packet& p) {
     forward += dk > 0;
     p.inv_dk[size_t(i)] = 1.0 / dk;
     p.inv[size_t(i)] = {1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z};
+    for (int a = 0; a < 3; ++a) p.finv[size_t(a)][size_t(i)] = float(std::clamp(p.inv[size_t(i)][a], -1e20, 1e20));
+    p.t_enter[size_t(i)] = float_below(ray.span.t0);
+    p.update_exit(i);
     const double su = ray.dir[U] / dk, sv = ray.dir[V] / dk;
     p.su_lo = std::min(p.su_lo, su), p.su_hi = std::max(p.su_hi, su);
     p.sv_lo = std::min(p.sv_lo, sv), p.sv_hi = std::max(p.sv_hi, sv);
@@ -92,15 +141,11 @@ void Tracer<T>::trace_packet(Packet& p) {
     return;
   }
   p.forward = forward == live;
-  if (lanes_at.size() < size_t(r.layout.depth) + 1) {
-    lanes_at.resize(size_t(r.layout.depth) + 1);
-    for (auto& l : lanes_at) l.reserve(kMaxLanes);
-  }
-  std::vector<uint16_t>& all = lanes_at[0];
+  LaneSet& all = lanes_at[0];
   all.clear();
   for (int i = 0; i < p.lanes; ++i)
-    if (p.live[size_t(i)]) all.push_back(uint16_t(i));
-  descend_packet(p, root(), all, K, U, V);
+    if (p.live[size_t(i)]) all.set(i);
+  descend_packet<W>(p, root(), all, K, U, V);
 }
 
 /// Whether the packet's frustum meets the box [lo, hi] (finest voxel coordinates): one test
@@ -122,27 +167,28 @@ bool Tracer<T>::packet_meets(const Packet& p, const Vec3d& lo, const Vec3d& hi, 
 }
 
 template <typename T>
-void Tracer<T>::descend_packet(Packet& p, const Node<T>& n, const std::vector<uint16_t>& parent_lanes, int K, int U, int V) {
+template <int W>
+void Tracer<T>::descend_packet(Packet& p, const Node<T>& n, const LaneSet& parent_lanes, int K, int U, int V) {
   ++counters.nodes;
   if (!crosses(n.min, n.max)) return;
   const Box3d box = node_box(n);
   if (!packet_meets(p, box.lo, box.hi, K, U, V)) return;
-  std::vector<uint16_t>& lanes = lanes_at[size_t(n.depth) + 1];
-  lanes_through(p, box, parent_lanes, lanes);
-  if (lanes.empty()) return;
+  LaneSet& lanes = lanes_at[size_t(n.depth) + 1];
+  if (!lanes_through<W>(p, box, parent_lanes, lanes)) return;
   if (n.unread_page) {
     Node<T> read = n;
     read.page = page(n.unread_page);
     read.unread_page = 0;
-    lod_leaf(read) ? packet_cells(p, read, lanes, K, U, V) : descend_children(p, read, lanes, K, U, V);
+    lod_leaf(read) ? packet_cells(p, read, lanes, K, U, V) : descend_children<W>(p, read, lanes, K, U, V);
     return;
   }
   if (lod_leaf(n)) return packet_cells(p, n, lanes, K, U, V);
-  descend_children(p, n, lanes, K, U, V);
+  descend_children<W>(p, n, lanes, K, U, V);
 }
 
 template <typename T>
-void Tracer<T>::descend_children(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V) {
+template <int W>
+void Tracer<T>::descend_children(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V) {
   // The half of the children nearer along K first: a lane's hit there is nearer than any
   // in the far half; within a half, each lane keeps its nearest.
   const int near = p.forward ? 0 : 1;
@@ -150,7 +196,7 @@ void Tracer<T>::descend_children(Packet& p, const Node<T>& n, const std::vector<
     for (int oct = 0; oct < 8; ++oct) {
       if (((oct >> K) & 1) != half) continue;
       const Node<T> c = child(n, oct);
-      if (c.depth >= 0) descend_packet(p, c, lanes, K, U, V);
+      if (c.depth >= 0) descend_packet<W>(p, c, lanes, K, U, V);
     }
 }
 

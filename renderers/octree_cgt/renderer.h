@@ -34,8 +34,18 @@ namespace brickyard::octree_cgt {
 /// The store's value types: each .cpp explicitly instantiates what it defines, X(type) for each.
 #define BRICKYARD_OCTREE_CGT_FOR_VOXELS(X) X(uint8_t) X(uint16_t) X(float)
 
+/// The SIMD lanes of the build's target, in float: a packlet's width by default.
+#if defined(__AVX512F__)
+inline constexpr int kBuildPackletLanes = 16;
+#elif defined(__AVX__)
+inline constexpr int kBuildPackletLanes = 8;
+#else
+inline constexpr int kBuildPackletLanes = 4;
+#endif
+
 struct Params {
   int packet{};             // rays per side of a packet; 1: the single-ray mode
+  int packlet{};            // lanes a packet's tests run on together (4, 8, 16); 0: the build's SIMD width
   bool mcell{};             // cull macrocells (octree nodes, pages) by their range
   bool cell{};              // cull cells by their corners' range before solving their cubic
   bool slice{};             // packets: a cap's voxels gathered once for all its cells
@@ -63,6 +73,7 @@ struct Shared {
   std::vector<Vec3s> nodes_at;    // per depth
   std::vector<Vec3s> level_dims;  // per level of detail
   int major_axis = 0;             // K, chosen by plan_frame()
+  int packlet_lanes = kBuildPackletLanes;  // W, chosen by plan_frame()
   double eye_k = 0;               // the eye's K coordinate, finest voxels
   std::vector<double> lod_k;      // per depth: the K distance from which a node is drawn at its own level
 

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -49,6 +50,35 @@ struct Node {
 
 constexpr int kMaxLanes = 16 * 16;
 
+/// Lanes of a packet as bits: lane i is bit i % 64 of word i / 64, so that a packlet of W
+/// lanes (W dividing 64) is W adjacent bits of one word.
+struct LaneSet {
+  std::array<uint64_t, kMaxLanes / 64> words{};
+
+  void clear() { words.fill(0); }
+  void set(int i) { words[size_t(i >> 6)] |= uint64_t(1) << (i & 63); }
+  bool any() const {
+    for (uint64_t w : words)
+      if (w) return true;
+    return false;
+  }
+  template <typename F>
+  void for_each(F&& f) const {
+    for (size_t w = 0; w < words.size(); ++w)
+      for (uint64_t bits = words[w]; bits; bits &= bits - 1) f(int(w * 64) + __builtin_ctzll(bits));
+  }
+};
+
+/// The float nearest t from below (above): packlet tests in float stay conservative.
+inline float float_below(double t) {
+  const float f = float(t);
+  return double(f) > t ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+}
+inline float float_above(double t) {
+  const float f = float(t);
+  return double(f) < t ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+}
+
 /// Rays of one packet, structure of arrays; lanes outside the volume start done.
 struct Packet {
   int lanes = 0;
@@ -58,9 +88,16 @@ struct Packet {
   std::array<double, kMaxLanes> inv_dk{};
   std::array<Vec3d, kMaxLanes> inv{};
   std::array<uint8_t, kMaxLanes> live{};
+  // Per lane, in float for the packlet tests (SIMD lanes of the build): 1/d (never infinite:
+  // +-0 components give +-1e20), the ray's span entry, and its exit or hit so far.
+  alignas(64) std::array<std::array<float, kMaxLanes>, 3> finv{};
+  alignas(64) std::array<float, kMaxLanes> t_enter{}, t_exit{};
   Vec3d o{0.0};
   double su_lo = 0, su_hi = 0, sv_lo = 0, sv_hi = 0;  // slopes du/dK, dv/dK over the live lanes
   bool forward = true;                                // the live lanes' d_K > 0
+
+  /// Lane i's float exit after its hit changed.
+  void update_exit(int i) { t_exit[size_t(i)] = float_above(std::min(ray[size_t(i)].span.t1, hit[size_t(i)].t)); }
 };
 
 template <typename T>
@@ -123,7 +160,7 @@ struct Tracer {
   size_t next_cap = 0;
   const OctreeScalars<T>& scalars_at(int d, const Vec3s& c);
   void cap_block(const Node<T>& n, const Vec3s& lo, double block[27]);
-  void packet_cells(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V);
+  void packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V);
   void single_cells(const Node<T>& n, const Vec3d& o, const Vec3d& d, Interval<double> span, Hit& best);
   double corner(const Vec3s& v, const Node<T>& n, const T* own);
   void cell_corners(const Vec3s& cell, const Node<T>& n, const T* cap, double c[8], double& lo, double& hi);
@@ -141,13 +178,18 @@ struct Tracer {
   std::unique_ptr<Packet> single;  // the one lane of single_cells()
   /// Per depth, the lanes whose rays still cross the node being visited there and can still
   /// find a nearer hit in it: a node tests only its parent's lanes.
-  std::vector<std::vector<uint16_t>> lanes_at;
+  std::array<LaneSet, kOctreeMaxDepth + 2> lanes_at{};
   void render_packets(const Tile& tile, int size, FrameBuffers& out);
+  // W: the lanes of a packlet, the frame's (Shared::packlet_lanes).
+  template <int W>
   void trace_packet(Packet& p);
-  void lanes_through(const Packet& p, const Box3d& b, const std::vector<uint16_t>& from, std::vector<uint16_t>& to) const;
+  template <int W>
+  bool lanes_through(const Packet& p, const Box3d& b, const LaneSet& from, LaneSet& to) const;
   bool packet_meets(const Packet& p, const Vec3d& lo, const Vec3d& hi, int K, int U, int V) const;
-  void descend_packet(Packet& p, const Node<T>& n, const std::vector<uint16_t>& parent_lanes, int K, int U, int V);
-  void descend_children(Packet& p, const Node<T>& n, const std::vector<uint16_t>& lanes, int K, int U, int V);
+  template <int W>
+  void descend_packet(Packet& p, const Node<T>& n, const LaneSet& parent_lanes, int K, int U, int V);
+  template <int W>
+  void descend_children(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V);
 };
 
 }  // namespace brickyard::octree_cgt

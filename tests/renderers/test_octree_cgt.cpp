@@ -94,8 +94,9 @@ TEST_F(OctreeCgt, HitsWhereTheReferenceDoesToATenThousandthOfAVoxel) {
   }
 }
 
-TEST_F(OctreeCgt, PacketsOfEverySizeHitWhereSingleRaysDoPartialPacketsIncluded) {
-  // 50x37: the image's last packets in x and y are partial at every packet size.
+TEST_F(OctreeCgt, PacketsOfEverySizeAndPackletWidthHitWhereSingleRaysDoPartialPacketsIncluded) {
+  // 50x37: the image's last packets in x and y are partial at every packet size; packlets of
+  // 4, 8 and 16 lanes (0: the build's width) split them differently and must not matter.
   const std::string what = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], "shading": {"light": "headlight"})";
   struct Case {
     const char* store;
@@ -104,36 +105,40 @@ TEST_F(OctreeCgt, PacketsOfEverySizeHitWhereSingleRaysDoPartialPacketsIncluded) 
   for (const Case& c : {Case{"ml.store", what}, Case{"fbm.store", R"("mode": "iso", "values": "normalized",
                           "isosurfaces": [{"value": 0.45}, {"value": 0.6}])"}}) {
     SCOPED_TRACE(c.store);
-    const auto frame = [&](int packet) { return render(scene(c.store, c.what, 50, "", 37), {{"packet", double(packet)}}); };
+    const auto frame = [&](int packet, int packlet = 0) {
+      return render(scene(c.store, c.what, 50, "", 37), {{"packet", double(packet)}, {"packlet", double(packlet)}});
+    };
     const FrameBuffers single = frame(1);
     int hits = 0;
     for (int y = 0; y < single.height(); ++y)
       for (int x = 0; x < single.width(); ++x) hits += std::isfinite(single.depth(x, y));
     EXPECT_GT(hits, 300);
-    for (int packet : {2, 4, 8, 16}) {
-      SCOPED_TRACE(packet);
-      const FrameBuffers fb = frame(packet);
-      double worst = 0;
-      int mismatched = 0;
-      for (int y = 0; y < fb.height(); ++y)
-        for (int x = 0; x < fb.width(); ++x) {
-          const float a = single.depth(x, y), b = fb.depth(x, y);
-          if (std::isfinite(a) != std::isfinite(b)) ++mismatched;
-          else if (std::isfinite(a)) worst = std::max(worst, std::abs(double(a) - double(b)));
-        }
-      EXPECT_EQ(mismatched, 0);
-      EXPECT_LT(worst, 1e-4) << "world units; voxels are larger";
-      EXPECT_EQ(std::memcmp(single.color.data(), fb.color.data(), fb.color.size() * sizeof(Rgbaf)), 0)
-          << "the same cells, the same roots: the same colours";
-    }
+    for (int packet : {2, 4, 8, 16})
+      for (int packlet : {0, 4, 8, 16}) {
+        SCOPED_TRACE(::testing::Message() << packet << "x" << packet << " in packlets of " << packlet);
+        const FrameBuffers fb = frame(packet, packlet);
+        double worst = 0;
+        int mismatched = 0;
+        for (int y = 0; y < fb.height(); ++y)
+          for (int x = 0; x < fb.width(); ++x) {
+            const float a = single.depth(x, y), b = fb.depth(x, y);
+            if (std::isfinite(a) != std::isfinite(b)) ++mismatched;
+            else if (std::isfinite(a)) worst = std::max(worst, std::abs(double(a) - double(b)));
+          }
+        EXPECT_EQ(mismatched, 0);
+        EXPECT_LT(worst, 1e-4) << "world units; voxels are larger";
+        EXPECT_EQ(std::memcmp(single.color.data(), fb.color.data(), fb.color.size() * sizeof(Rgbaf)), 0)
+            << "the same cells, the same roots: the same colours";
+      }
   }
   // Anything but a power of two is refused, naming the parameter.
-  try {
-    RenderSession session(scene("ml.store", what), testing::backend_options("octree_cgt", {{"packet", 3.0}}));
-    FAIL() << "packet 3 accepted";
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("packet"), std::string::npos) << e.what();
-  }
+  for (const char* param : {"packet", "packlet"})
+    try {
+      RenderSession session(scene("ml.store", what), testing::backend_options("octree_cgt", {{param, 3.0}}));
+      FAIL() << param << " 3 accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(param), std::string::npos) << e.what();
+    }
 }
 
 TEST_F(OctreeCgt, EveryOptimisationOnOrOffGivesTheSameImage) {
