@@ -44,20 +44,26 @@ OctreePage<T> as_octree_page(P p, const OctreeLayout& layout) {
 }
 }  // namespace detail
 
+/// @brief A node with a record, where a descent may start: an ancestor already found (a
+/// renderer's path to its current node) makes a neighbour's descent short.
+template <typename T>
+struct OctreeWalkStart {
+  OctreePage<T> page;   ///< the page holding the node
+  int root = 0;         ///< depth of the page's root
+  int level = 0;        ///< interior level of the node within the page
+  uint32_t index = 0;   ///< node index within that level
+  int depth = 0;        ///< the node's depth (interior: below the caps)
+};
+
+/// @brief octree_scalars() from `at`, an interior node that is an ancestor of (target, c) or
+/// the node itself.
 template <typename T, typename GetPage>
-OctreeScalars<T> octree_scalars(const OctreeLayout& layout, GetPage&& get_page, int target, const Vec3s& c) {
-  uint64_t page_id = OctreeLayout::page_id(0, Vec3s(0));
-  auto bytes = get_page(page_id);
-  OctreeScalars<T> out;
-  if (!bytes) {
-    out.missing_page = page_id;
-    return out;
-  }
-  OctreePage<T> page = detail::as_octree_page<T>(bytes, layout);
-  int root = 0;        // depth of the page's root
-  int level = 0;       // interior level within the page
-  uint32_t index = 0;  // node index within that level
-  for (int t = 0;; ++t) {
+OctreeScalars<T> octree_scalars_below(const OctreeLayout& layout, GetPage&& get_page, const OctreeWalkStart<T>& at, int target,
+                                      const Vec3s& c) {
+  OctreePage<T> page = at.page;
+  int root = at.root, level = at.level;
+  uint32_t index = at.index;
+  for (int t = at.depth;; ++t) {
     const bool cap = t == layout.cap_depth();
     const T* scalars = cap ? page.cap_scalars(index) : page.node_scalars(level, index);
     if (t == target) return {scalars, T{}, t, true, 0};
@@ -78,12 +84,24 @@ OctreeScalars<T> octree_scalars(const OctreeLayout& layout, GetPage&& get_page, 
       ++level;
       continue;
     }
-    page_id = OctreeLayout::page_id(t + 1, {c.x >> shift, c.y >> shift, c.z >> shift});
-    bytes = get_page(page_id);
+    const uint64_t page_id = OctreeLayout::page_id(t + 1, {c.x >> shift, c.y >> shift, c.z >> shift});
+    auto bytes = get_page(page_id);
     if (!bytes) return {nullptr, scalars[octant], t, false, page_id};
     page = detail::as_octree_page<T>(bytes, layout);
     root = t + 1, level = 0, index = 0;
   }
+}
+
+template <typename T, typename GetPage>
+OctreeScalars<T> octree_scalars(const OctreeLayout& layout, GetPage&& get_page, int target, const Vec3s& c) {
+  const uint64_t page_id = OctreeLayout::page_id(0, Vec3s(0));
+  auto bytes = get_page(page_id);
+  if (!bytes) {
+    OctreeScalars<T> out;
+    out.missing_page = page_id;
+    return out;
+  }
+  return octree_scalars_below<T>(layout, get_page, {detail::as_octree_page<T>(bytes, layout), 0, 0, 0, 0}, target, c);
 }
 
 /// @brief The voxel v of level s (0: finest), v inside layout.level_dims(s).

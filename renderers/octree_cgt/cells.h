@@ -19,12 +19,19 @@ namespace brickyard::octree_cgt {
 /// level of detail stops above the caps).
 template <typename T>
 const OctreeScalars<T>& Tracer<T>::scalars_at(int d, const Vec3s& c) {
-  for (const CapEntry& e : caps)
-    if (e.c == c && e.depth == d && e.generation == pages.generation()) return e.scalars;
+  CapEntry& e = caps[cap_slot(d, c)];
+  if (e.c == c && e.depth == d && e.generation == pages.generation()) return e.scalars;
   ++counters.samples;  // a lookup of the octree
-  CapEntry& e = caps[next_cap++ % caps.size()];
-  e.scalars = octree_scalars<T>(r.layout, pages, d, c);
   e.c = c, e.depth = d, e.generation = pages.generation();
+  for (int a = d - 1; a >= 0; --a) {
+    const PathEntry& anc = path[size_t(a)];
+    const int up = d - a;
+    if (anc.generation == pages.generation() && anc.c == Vec3s{c.x >> up, c.y >> up, c.z >> up}) {
+      e.scalars = octree_scalars_below<T>(r.layout, pages, {*anc.page, anc.page->header->root_depth, anc.level, anc.index, a}, d, c);
+      return e.scalars;
+    }
+  }
+  e.scalars = octree_scalars<T>(r.layout, pages, d, c);
   return e.scalars;
 }
 

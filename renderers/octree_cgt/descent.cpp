@@ -79,6 +79,7 @@ bool Tracer<T>::descend(const Node<T>& n, const Vec3d& o, const Vec3d& d, const 
     read.unread_page = 0;
     return descend(read, o, d, inv, span, best);
   }
+  on_path(n);
   if (lod_leaf(n)) {
     single_cells(n, o, d, span, best);
     return best.surface >= 0;

@@ -179,9 +179,11 @@ void Tracer<T>::descend_packet(Packet& p, const Node<T>& n, const LaneSet& paren
     Node<T> read = n;
     read.page = page(n.unread_page);
     read.unread_page = 0;
+    on_path(read);
     lod_leaf(read) ? packet_cells(p, read, lanes, K, U, V) : descend_children<W>(p, read, lanes, K, U, V);
     return;
   }
+  on_path(n);
   if (lod_leaf(n)) return packet_cells(p, n, lanes, K, U, V);
   descend_children<W>(p, n, lanes, K, U, V);
 }

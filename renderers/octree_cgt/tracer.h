@@ -156,8 +156,25 @@ struct Tracer {
     uint64_t generation = ~uint64_t(0);
     OctreeScalars<T> scalars;
   };
-  std::array<CapEntry, 16> caps{};
-  size_t next_cap = 0;
+  std::array<CapEntry, 32> caps{};  // direct-mapped by cap_slot()
+  static size_t cap_slot(int d, const Vec3s& c) {
+    return size_t((uint64_t(c.x) * 73856093u) ^ (uint64_t(c.y) * 19349663u) ^ (uint64_t(c.z) * 83492791u) ^ uint64_t(d)) & 31;
+  }
+  /// The descent's path: per depth, the last node visited there (with a record), from which a
+  /// neighbour's scalars are found by going down from the nearest common ancestor rather than
+  /// from the root (the paper's neighbour finding).
+  struct PathEntry {
+    uint64_t generation = ~uint64_t(0);
+    Vec3s c{-1};
+    const OctreePage<T>* page = nullptr;
+    int level = 0;
+    uint32_t index = 0;
+  };
+  std::array<PathEntry, kOctreeMaxDepth + 1> path{};
+  void on_path(const Node<T>& n) {
+    if (n.consolidated || n.unread_page || n.depth >= r.layout.cap_depth()) return;
+    path[size_t(n.depth)] = {pages.generation(), n.c, n.page, n.level, n.index};
+  }
   const OctreeScalars<T>& scalars_at(int d, const Vec3s& c);
   void cap_block(const Node<T>& n, const Vec3s& lo, double block[27]);
   void packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V);
