@@ -43,6 +43,12 @@ inline Cubic trilinear_cubic(const double c[8], double offset, const double u0[3
 /// @brief The roots of c2 s^2 + c1 s + c0 in the open interval (lo, hi), ascending; returns
 /// how many (0 to 2). Cancellation-free form of the quadratic formula.
 inline int quadratic_roots_in(double c2, double c1, double c0, double lo, double hi, double out[2]) {
+  // Past 2^500, c1^2 or 4 c2 c0 could overflow (the discriminant would be NaN, and the roots
+  // lost): scaling all three by a power of two moves no root and rounds nothing.
+  if (const double big = std::max({std::fabs(c2), std::fabs(c1), std::fabs(c0)}); big > 0x1p500 && std::isfinite(big)) {
+    const int e = std::ilogb(big);
+    c2 = std::ldexp(c2, -e), c1 = std::ldexp(c1, -e), c0 = std::ldexp(c0, -e);
+  }
   double r[2];
   int n = 0;
   if (c2 == 0) {

@@ -159,9 +159,12 @@ TEST(Cubic, FirstRootIsScaleInvariant) {
   const Cubic simple = from_roots(0.2, 0.5, 0.9);
   const Cubic tangent{0.140625, -0.75, 1.0, 0.0};
   const Cubic none{0.140625 + 1e-6, -0.75, 1.0, 0.0};
-  for (double k : {0x1p-100, -0x1p-100, 0x1p100, -0x1p100, 1e-30, -1e-30, 1e-15, 1e15, 1e30, -1e30}) {
+  // Scales past 1e154, where the squares of the derivative's coefficients overflow, too.
+  for (double k : {0x1p-100, -0x1p-100, 0x1p100, -0x1p100, 0x1p1000, -0x1p1000, 1e-30, -1e-30, 1e-15, 1e15, 1e30,
+                   -1e30, 1e200, -1e300}) {
     auto scaled = [k](Cubic g) { return Cubic{g.c0 * k, g.c1 * k, g.c2 * k, g.c3 * k}; };
-    const bool exact = std::fabs(std::log2(std::fabs(k))) == 100;
+    const double log2k = std::fabs(std::log2(std::fabs(k)));
+    const bool exact = log2k == 100 || log2k == 1000;
     auto r = first_root(scaled(simple), 1.0);
     ASSERT_TRUE(r) << k;
     EXPECT_NEAR(*r, 0.2, 1e-15) << k;
