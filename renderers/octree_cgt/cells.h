@@ -191,7 +191,7 @@ bool Tracer<T>::intersect(const Vec3s& cell, const double c[8], double lo, doubl
     const double u0[3] = {p0.x - double(cell.x), p0.y - double(cell.y), p0.z - double(cell.z)};
     const double du[3] = {d.x, d.y, d.z};
     const Cubic g = trilinear_cubic(c, iso, u0, du);
-    const auto root = first_root(g, cs.t1 - cs.t0, r.p.root_tolerance);
+    const auto root = first_root_falsi(g, cs.t1 - cs.t0, 64, r.p.root_tolerance);
     if (!root) continue;
     const double t = cs.t0 + *root;
     if (t >= best.t) continue;
