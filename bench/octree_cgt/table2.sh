@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The project's Table II (Knoll et al. 2006): octree_cgt on one scene, single rays against
-# packets of every size, then 8x8 packets with each optimisation added in turn. For each row:
+# packets of every size, then 8x8 packets with each optimisation added in turn, the levels of
+# detail (multires at dP/dV 1 and 2) last. For each row:
 # frame time (median of the frames after the first) and fps, octree lookups, cells intersected
 # and nodes visited per ray, and octree page visits per frame (each tile counts the pages it pins).
 #
@@ -49,15 +50,15 @@ PY
 fi
 list="0$(for ((i = 1; i < frames; ++i)); do printf ',0'; done)"
 csv="${TABLE2_CSV:-table2.csv}"
-echo "row,packet,mcell,cell,slice,ms,fps,lookups_per_ray,cells_per_ray,nodes_per_ray,page_visits_per_frame" > "$csv"
+echo "row,packet,mcell,cell,slice,dpdv,ms,fps,lookups_per_ray,cells_per_ray,nodes_per_ray,page_visits_per_frame" > "$csv"
 printf '%-34s %9s %7s %11s %11s %11s %11s\n' "octree_cgt" "ms" "fps" "lookups/ray" "cells/ray" "nodes/ray" "page visits"
 row() {
-  local name="$1" packet="$2" mcell="$3" cell="$4" slice="$5"
+  local name="$1" packet="$2" mcell="$3" cell="$4" slice="$5" dpdv="${6:-0}"
   "$by" -q render "$scene" "${args[@]}" --backend octree_cgt --frames "$list" --set packet="$packet" --set mcell="$mcell" \
-    --set cell="$cell" --set slice="$slice" -o "$work/f.png" --stats "$work/s.json" > /dev/null
-  python3 - "$work/s.json" "$name" "$packet" "$mcell" "$cell" "$slice" "$csv" <<'PY'
+    --set cell="$cell" --set slice="$slice" --set dpdv="$dpdv" -o "$work/f.png" --stats "$work/s.json" > /dev/null
+  python3 - "$work/s.json" "$name" "$packet" "$mcell" "$cell" "$slice" "$dpdv" "$csv" <<'PY'
 import json, statistics, sys
-path, name, packet, mcell, cell, slice_, csv = sys.argv[1:]
+path, name, packet, mcell, cell, slice_, dpdv, csv = sys.argv[1:]
 frames = json.load(open(path))["frames"][1:]  # the first is cold
 ms = statistics.median(f["seconds"] for f in frames) * 1e3
 f = frames[-1]
@@ -65,7 +66,7 @@ rays = max(f["rays"], 1)
 vals = [ms, 1e3 / ms, f["samples"] / rays, f["cells"] / rays, f["nodes"] / rays, f["bricks"]]
 print(f"{name:34s} {vals[0]:9.1f} {vals[1]:7.2f} {vals[2]:11.2f} {vals[3]:11.2f} {vals[4]:11.2f} {vals[5]:11.0f}")
 with open(csv, "a") as out:
-    out.write(",".join([name, packet, mcell, cell, slice_] + [f"{v:.4g}" for v in vals]) + "\n")
+    out.write(",".join([name, packet, mcell, cell, slice_, dpdv] + [f"{v:.4g}" for v in vals]) + "\n")
 PY
 }
 row "single ray" 1 1 1 1
@@ -73,5 +74,7 @@ for p in 2 4 8 16; do row "packets ${p}x${p}" "$p" 1 1 1; done
 row "8x8, no culling, no slice reuse" 8 0 0 0
 row "8x8 + macrocell culling" 8 1 0 0
 row "8x8 + cell culling" 8 1 1 0
-row "8x8 + slice reuse (all on)" 8 1 1 1
+row "8x8 + slice reuse" 8 1 1 1
+row "8x8 + multires (dP/dV 1)" 8 1 1 1 1
+row "8x8 + multires (dP/dV 2)" 8 1 1 1 2
 echo "figures: $csv"

@@ -54,7 +54,36 @@ void Tracer<T>::shade(const PrimaryRay& ray, const Hit& h, PixelResult& px) {
   if (!r.shading.lit()) return;
   double light_distance;
   const Vec3d l = r.shading.to_light_along(ray.world, h.t, light_distance);
-  px.color = r.shading.shade(px.color, n, -ray.world.dir, l, false);
+  const bool shadowed = r.scene.shading.casts_shadows() && in_shadow(ray.world.at(h.t), l, light_distance);
+  px.color = r.shading.shade(px.color, n, -ray.world.dir, l, shadowed);
+}
+
+/// Whether the segment from a hit to the light crosses an isosurface, traced through the
+/// shadow rays' levels of detail (coarser than the primary rays', as the paper has it: a
+/// shadow is a coarser feature than the surface it falls on). It leaves the surface by 1/100
+/// voxel, as the reference does, plus the reach of the coarsest cells the shadow ray may meet
+/// there, so that a coarse copy of the surface it starts on does not shadow it.
+template <typename T>
+bool Tracer<T>::in_shadow(const Vec3d& p_world, const Vec3d& l, double light_distance) {
+  ++counters.shadow_rays;
+  const Vec3d o = r.geo.to_voxel(p_world), d = l / r.geo.spacing;
+  double offset = 1e-2;
+  if (r.lod) {
+    const double distance = std::abs(o[r.major_axis] - r.eye_k);
+    for (int depth = 0; depth < r.layout.cap_depth(); ++depth)
+      if (distance >= r.shadow_lod_k[size_t(depth)]) {
+        offset += 0.5 * double(int64_t(1) << r.layout.level_of_depth(depth));
+        break;
+      }
+  }
+  Interval<double> span = brickyard::intersect(Rayd(o, d), r.geo.voxel_clip);
+  span.t0 = std::max(span.t0, offset * r.geo.voxel_size);
+  span.t1 = std::min(span.t1, light_distance);
+  if (span.empty()) return false;
+  lod_k = r.shadow_lod_k.data();
+  const Hit h = trace(o, d, span);
+  lod_k = r.lod_k.data();
+  return h.surface >= 0;
 }
 
 /// Front-to-back descent from the root over [span.t0, span.t1].

@@ -17,13 +17,13 @@ namespace brickyard::octree_cgt {
 template <typename T>
 bool Tracer<T>::lod_leaf(const Node<T>& n) const {
   if (n.depth == r.layout.cap_depth()) return true;
-  if (r.p.dpdv <= 0) return false;
+  if (!r.lod) return false;
   const int K = r.major_axis;
   const int64_t w = width(n.depth);
   const double lo = double(n.c[K] * w), hi = double((n.c[K] + 1) * w);
   const double e = r.eye_k;
   const double distance = e < lo ? lo - e : e > hi ? e - hi : 0.0;
-  return distance >= r.lod_k[size_t(n.depth)];
+  return distance >= lod_k[size_t(n.depth)];
 }
 
 /// How far a node's cells reach past its region at the levels of detail it or a node below it
@@ -32,12 +32,12 @@ bool Tracer<T>::lod_leaf(const Node<T>& n) const {
 /// that of the shallowest depth whose transition slice lies within the node's K extent.
 template <typename T>
 double Tracer<T>::lod_reach(const Node<T>& n) const {
-  if (r.p.dpdv <= 0) return 0;
+  if (!r.lod) return 0;
   const int K = r.major_axis;
   const int64_t w = width(n.depth);
   const double far = std::max(std::abs(double(n.c[K] * w) - r.eye_k), std::abs(double((n.c[K] + 1) * w) - r.eye_k));
   for (int d = n.depth; d < r.layout.cap_depth(); ++d)
-    if (r.lod_k[size_t(d)] <= far) return 0.5 * double((int64_t(1) << r.layout.level_of_depth(d)) - 1);
+    if (lod_k[size_t(d)] <= far) return 0.5 * double((int64_t(1) << r.layout.level_of_depth(d)) - 1);
   return 0;
 }
 

@@ -27,6 +27,10 @@ const ParamTable<Params>& params_table() {
       {"dpdv", &Params::dpdv, 0.0, 0.0, 64.0,
        "level of detail (the paper's dP/dV): a node's own coarser voxels are used where one covers at most this many pixels "
        "at the node's nearest slice along K; 0: always the finest"},
+      {"multires", &Params::multires, 1, 0, 1,
+       "1: levels of detail at dpdv (the paper's multiresolution); 0: the finest level everywhere (Table II)"},
+      {"shadow_dpdv", &Params::shadow_dpdv, 2.0, 1.0, 64.0,
+       "shadow rays are traced through a coarser level of detail: dP/dV this many times the primary rays'"},
       {"show_levels", &Params::show_levels, 0, 0, 1, "1: colour each hit by the level of detail it was found at"},
       {"pinned_pages", &Params::pinned_pages, 64, 4, 4096,
        "octree pages one tile keeps pinned in the cache's L1 while it renders (then released, and fetched again)"},
@@ -60,11 +64,14 @@ void Shared::plan_frame(const FrameSetup& setup) {
   eye_k = geo.to_voxel(setup.camera.eye)[K];
   const double pixel_angle = 2.0 * std::tan(setup.camera.fov_degrees * M_PI / 360.0) / double(std::max(setup.height, 1));
   const double fk = std::max(std::abs(f[K]), 1e-12);
+  lod = p.multires && p.dpdv > 0;
   lod_k.assign(size_t(layout.depth), std::numeric_limits<double>::infinity());
-  if (p.dpdv > 0)
+  shadow_lod_k = lod_k;
+  if (lod)
     for (int d = 0; d < layout.depth; ++d) {
       const double voxel = double(int64_t(1) << layout.level_of_depth(d)) * geo.voxel_size;
       lod_k[size_t(d)] = voxel / (p.dpdv * pixel_angle) * fk / geo.spacing[K];
+      shadow_lod_k[size_t(d)] = lod_k[size_t(d)] / p.shadow_dpdv;
     }
 }
 
@@ -99,6 +106,7 @@ BackendEntry octree_cgt_backend() {
   e.info.kinds = {DataKind::structured};
   e.info.records = {RecordKind::octree_page};
   e.info.modes = {RenderMode::iso};
+  e.info.shadows = true;
   e.info.params = octree_cgt::params_table().declarations();
   e.info.quality_param = "dpdv";
   e.info.quality_sweep = {4.0, 2.0, 1.0, 0.5, 0.0};

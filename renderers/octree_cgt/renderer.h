@@ -50,6 +50,8 @@ struct Params {
   bool cell{};              // cull cells by their corners' range before solving their cubic
   bool slice{};             // packets: a cap's voxels gathered once for all its cells
   double dpdv{};            // level of detail: pixels a coarse voxel may cover; 0: the finest level
+  bool multires{};          // levels of detail on (at dpdv); 0: the finest level whatever dpdv says
+  double shadow_dpdv{};     // shadow rays' dP/dV as a multiple of the primary rays'
   bool show_levels{};       // colour hits by the level they were found at
   int pinned_pages{};       // pages a tile keeps pinned before it lets them go
   double root_tolerance{};  // relative |g| at an extremum of the cell's cubic that counts as a touching root
@@ -75,7 +77,9 @@ struct Shared {
   int major_axis = 0;             // K, chosen by plan_frame()
   int packlet_lanes = kBuildPackletLanes;  // W, chosen by plan_frame()
   double eye_k = 0;               // the eye's K coordinate, finest voxels
+  bool lod = false;               // levels of detail this frame (multires and dpdv > 0)
   std::vector<double> lod_k;      // per depth: the K distance from which a node is drawn at its own level
+  std::vector<double> shadow_lod_k;  // the same for shadow rays (at shadow_dpdv x dpdv: nearer)
 
   /// The frame's major axis and transition slices.
   void plan_frame(const FrameSetup& setup);

@@ -107,10 +107,11 @@ struct Tracer {
   const ImageRays rays;
   RayCounters& counters;
   PageMemo<T> pages;
+  const double* lod_k;  // the transition slices of the rays being traced: primary or shadow
 
   Tracer(const Shared& shared, const FrameSetup& s, RayCounters& c)
       : r(shared), setup(s), rays(s.camera, s.width, s.height), counters(c),
-        pages(r.ctx.pages(), r.layout, size_t(r.p.pinned_pages), c) {}
+        pages(r.ctx.pages(), r.layout, size_t(r.p.pinned_pages), c), lod_k(r.lod_k.data()) {}
 
   const OctreePage<T>* page(uint64_t id) { return pages.page(id); }
 
@@ -188,6 +189,7 @@ struct Tracer {
   void pixel(int x, int y, FrameBuffers& out);
   void shade(const PrimaryRay& ray, const Hit& h, PixelResult& px);
   Hit trace(const Vec3d& o, const Vec3d& d, Interval<double> span);
+  bool in_shadow(const Vec3d& p_world, const Vec3d& l, double light_distance);
   bool descend(const Node<T>& n, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> span, Hit& best);
 
   // --- Packets (packets.cpp) ---
