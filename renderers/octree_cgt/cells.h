@@ -12,6 +12,7 @@
 #include "renderers/common/cell_accessor.h"
 #include "renderers/common/cubic.h"
 #include "renderers/octree_cgt/tracer.h"
+#include "renderers/octree_cgt/transition.h"
 
 namespace brickyard::octree_cgt {
 
@@ -86,6 +87,9 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, 
   double corners[8][8], vlo[8], vhi[8];
   uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
   constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
+  // A coarser +K neighbour: the slab between the two levels' cells, built for the first lane.
+  const int coarse = coarser_neighbour_level(n);
+  bool transition_built = false;
   lanes.for_each([&](int i) {
     const PrimaryRay& ray = p.ray[size_t(i)];
     Hit& hit = p.hit[size_t(i)];
@@ -126,6 +130,11 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, 
           found |= intersect(cell, corners[local], vlo[local], vhi[local], org, dir, inv, ray.span, hit);
         }
       if (found) break;  // the next slice is farther along this ray
+    }
+    if (coarse >= 0) {
+      if (!transition_built) build_transition(n, coarse, transition), transition_built = true;
+      for (int b = 0; b < transition.boxes; ++b)
+        intersect_box(transition.box[size_t(b)], ray.org, ray.dir, p.inv[size_t(i)], ray.span, hit);
     }
     if (hit.t != t_before || hit.surface != surface_before) hit.level = L, p.update_exit(i);
   });

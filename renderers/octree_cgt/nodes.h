@@ -12,31 +12,38 @@
 
 namespace brickyard::octree_cgt {
 
-/// Whether the level of detail stops at node n: one of its voxels covers at most dpdv pixels
-/// at its nearest slice along K (the frame's transition slices).
+/// Whether the level of detail stops at the node at depth d and coordinates c (above the
+/// caps): one of its voxels covers at most dpdv pixels at its nearest slice along K (the
+/// frame's transition slices).
 template <typename T>
-bool Tracer<T>::lod_leaf(const Node<T>& n) const {
-  if (n.depth == r.layout.cap_depth()) return true;
+bool Tracer<T>::lod_stops(int d, const Vec3s& c) const {
   if (!r.lod) return false;
   const int K = r.major_axis;
-  const int64_t w = width(n.depth);
-  const double lo = double(n.c[K] * w), hi = double((n.c[K] + 1) * w);
+  const int64_t w = width(d);
+  const double lo = double(c[K] * w), hi = double((c[K] + 1) * w);
   const double e = r.eye_k;
   const double distance = e < lo ? lo - e : e > hi ? e - hi : 0.0;
-  return distance >= lod_k[size_t(n.depth)];
+  return distance >= lod_k[size_t(d)];
+}
+
+/// Whether node n is drawn with its own voxels: a cap, or where the level of detail stops.
+template <typename T>
+bool Tracer<T>::lod_leaf(const Node<T>& n) const {
+  return n.depth == r.layout.cap_depth() || lod_stops(n.depth, n.c);
 }
 
 /// How far a node's cells reach past its region at the levels of detail it or a node below it
 /// may be drawn at: a level-L voxel i sits at finest coordinate (i + 1/2) 2^L - 1/2, so
-/// level-L cells reach (2^L - 1) / 2 past. The coarsest level possible in the subtree is
-/// that of the shallowest depth whose transition slice lies within the node's K extent.
+/// level-L cells reach (2^L - 1) / 2 past, and a smooth transition's slab reaches as far as its
+/// coarser neighbour's cells begin. The coarsest level possible is that of the shallowest
+/// depth whose transition slice lies within the node's K extent.
 template <typename T>
 double Tracer<T>::lod_reach(const Node<T>& n) const {
   if (!r.lod) return 0;
   const int K = r.major_axis;
   const int64_t w = width(n.depth);
   const double far = std::max(std::abs(double(n.c[K] * w) - r.eye_k), std::abs(double((n.c[K] + 1) * w) - r.eye_k));
-  for (int d = n.depth; d < r.layout.cap_depth(); ++d)
+  for (int d = r.p.smooth ? 0 : n.depth; d < r.layout.cap_depth(); ++d)
     if (lod_k[size_t(d)] <= far) return 0.5 * double((int64_t(1) << r.layout.level_of_depth(d)) - 1);
   return 0;
 }

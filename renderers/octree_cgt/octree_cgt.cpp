@@ -29,6 +29,9 @@ const ParamTable<Params>& params_table() {
        "at the node's nearest slice along K; 0: always the finest"},
       {"multires", &Params::multires, 1, 0, 1,
        "1: levels of detail at dpdv (the paper's multiresolution); 0: the finest level everywhere (Table II)"},
+      {"smooth", &Params::smooth, 1, 0, 1,
+       "1: smooth transitions: cells between a level of detail and the coarser one beyond it, so that their surfaces meet "
+       "without cracks; 0: none (cracks where levels meet)"},
       {"shadow_dpdv", &Params::shadow_dpdv, 2.0, 1.0, 64.0,
        "shadow rays are traced through a coarser level of detail: dP/dV this many times the primary rays'"},
       {"show_levels", &Params::show_levels, 0, 0, 1, "1: colour each hit by the level of detail it was found at"},

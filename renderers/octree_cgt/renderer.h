@@ -51,6 +51,7 @@ struct Params {
   bool slice{};             // packets: a cap's voxels gathered once for all its cells
   double dpdv{};            // level of detail: pixels a coarse voxel may cover; 0: the finest level
   bool multires{};          // levels of detail on (at dpdv); 0: the finest level whatever dpdv says
+  bool smooth{};            // cells between levels of detail, so that their surfaces meet
   double shadow_dpdv{};     // shadow rays' dP/dV as a multiple of the primary rays'
   bool show_levels{};       // colour hits by the level they were found at
   int pinned_pages{};       // pages a tile keeps pinned before it lets them go

@@ -141,6 +141,7 @@ struct Tracer {
   }
 
   // --- The octree's nodes on the way down (nodes.h) ---
+  bool lod_stops(int depth, const Vec3s& c) const;
   bool lod_leaf(const Node<T>& n) const;
   double lod_reach(const Node<T>& n) const;
   Interval<double> node_span(const Node<T>& n, const Vec3d& o, const Vec3d& inv, Interval<double> span) const;
@@ -184,6 +185,25 @@ struct Tracer {
   void cell_corners(const Vec3s& cell, const Node<T>& n, const T* cap, double c[8], double& lo, double& hi);
   bool intersect(const Vec3s& cell, const double c[8], double lo, double hi, const Vec3d& o, const Vec3d& d,
                  const Vec3d& inv, Interval<double> s, Hit& best);
+
+  // --- Smooth transitions between levels of detail (transition.h) ---
+  /// A cell of the slab between a leaf and its coarser +K neighbour: a box (finest voxel
+  /// coordinates) and its corners, index dx + 2 dy + 4 dz.
+  struct TransitionBox {
+    Vec3d lo{0.0}, hi{0.0};
+    double corners[8] = {};
+    double vlo = 0, vhi = 0;
+  };
+  struct Transition {
+    int boxes = 0;
+    std::array<TransitionBox, 16> box{};  // 2 x 2 columns, each cut at most once per side
+  };
+  Transition transition;
+  /// The level n's +K neighbour is drawn at where it is coarser than n's own; -1 otherwise.
+  int coarser_neighbour_level(const Node<T>& n) const;
+  double voxel_at(int level, const Vec3s& v);
+  void build_transition(const Node<T>& n, int coarse, Transition& out);
+  bool intersect_box(const TransitionBox& box, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> s, Hit& best);
 
   // --- Single rays and shading (descent.cpp) ---
   void pixel(int x, int y, FrameBuffers& out);

@@ -201,6 +201,58 @@ TEST_F(OctreeCgt, LevelOfDetailTradesErrorForCellsAndBothModesAgree) {
   EXPECT_GE(colours.size(), 2u);
 }
 
+/// Pixels that see through a surface seen from outside (a closed, convex one): all 8
+/// neighbours hit it, and the pixel itself sees nothing or something `gap` farther than each.
+int holes(const FrameBuffers& fb, double gap) {
+  int n = 0;
+  for (int y = 1; y + 1 < fb.height(); ++y)
+    for (int x = 1; x + 1 < fb.width(); ++x) {
+      bool through = true;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (dx || dy) {
+            const float nb = fb.depth(x + dx, y + dy);
+            through &= std::isfinite(nb) && !(double(fb.depth(x, y)) <= double(nb) + gap);
+          }
+      n += through;
+    }
+  return n;
+}
+
+TEST_F(OctreeCgt, SmoothTransitionsLeaveNoCrackBetweenLevelsOfDetail) {
+  // A closed sphere seen from outside, at dP/dV where the finest level and the next meet across
+  // its visible half. Without smooth transitions a ray can pass between a level's last cells
+  // and the coarser level's first beyond them, and see the sphere's far side; with them, none
+  // does, in either mode. Eyes on the -K and the +K side of the three axes (on the +K side a
+  // coarser level's cells overlap the finer one's instead).
+  const double gap = 0.01;  // world units: a voxel of the 96^3 sphere
+  int cracked = 0;
+  for (const char* camera : {R"("eye": [0.5, -0.35, 0.5])", R"("eye": [1.35, 0.5, 0.5])", R"("eye": [0.5, 0.5, -0.4], "up": [0, 1, 0])",
+                             R"("eye": [-0.3, 0.45, 0.55])"}) {
+    SCOPED_TRACE(camera);
+    const std::string text = R"({"dataset": ")" + dir_->file("sphere.store") + R"(", "backend": "octree_cgt",
+        "image": {"width": 160, "height": 160}, "camera": {)" + std::string(camera) + R"(, "target": [0.5, 0.5, 0.5],
+        "fov_degrees": 50}, "mode": "iso", "isosurfaces": [{"value": 0.0}], "shading": {"light": "headlight"}})";
+    const Scene s = parse_scene(text, dir_->file("scene.json"));
+    const FrameBuffers finest = render(s);
+    ASSERT_EQ(holes(finest, gap), 0) << "the finest level is closed";
+    int coarser = 0;  // pixels drawn from coarser cells
+    for (double dpdv : {5.5, 6.0, 6.5, 7.0}) {
+      SCOPED_TRACE(dpdv);
+      const FrameBuffers lod = render(s, {{"dpdv", dpdv}});
+      EXPECT_EQ(holes(lod, gap), 0);
+      for (int y = 0; y < lod.height(); ++y)
+        for (int x = 0; x < lod.width(); ++x) coarser += std::abs(lod.depth(x, y) - finest.depth(x, y)) > 1e-6f;
+      if (dpdv == 6.0) {
+        EXPECT_EQ(holes(render(s, {{"dpdv", dpdv}, {"packet", 1}}), gap), 0) << "single rays";
+      }
+      cracked += holes(render(s, {{"dpdv", dpdv}, {"smooth", 0}}), gap);
+    }
+    EXPECT_GT(coarser, 100) << "levels of detail change across the sphere";
+  }
+  EXPECT_GT(cracked, 30) << "without smooth transitions the levels leave cracks (else this test shows nothing)";
+}
+
 TEST_F(OctreeCgt, ShadowsFallWhereTheReferencesDoAndThroughACoarserLevelOfDetail) {
   const std::string iso = R"("mode": "iso", "values": "normalized", "isosurfaces": [{"value": 0.45}, {"value": 0.6}], )";
   const std::string light = R"("light": "point", "light_position": [1.2, -0.4, 1.9])";
