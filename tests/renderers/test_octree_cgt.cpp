@@ -365,6 +365,36 @@ TEST_F(OctreeCgt, AnL1FarBelowTheOctreeGivesTheSameImage) {
   EXPECT_EQ(std::memcmp(roomy.depth.data(), small.depth.data(), roomy.depth.size() * sizeof(float)), 0);
 }
 
+TEST(OctreeCgtLarge, A1024CubedOctreeRendersWithAnL1FarBelowItsSize) {
+  // 2^30 voxels (1 GiB of u8), streamed into a store and its octree; mostly empty space, so
+  // both stay small on disk, but the octree is deep (10 levels) and wide (thousands of pages).
+  testing::TempDir dir;
+  const std::string store_dir = dir.file("blobs1024.store");
+  build_store(*make_field_source(make_field("sparse-blobs"), {1024, 1024, 1024}, ValueType::u8), store_dir, {});
+  build_octree(store_dir, {});
+  Store store(store_dir);
+  const OctreeSummary& octree = *store.manifest().octree;
+  ASSERT_EQ(octree.depth, 10);
+  ASSERT_GT(octree.pages, 2000u);
+  const auto frame = [&](const std::string& l1, FrameStats* stats = nullptr) {
+    const std::string text = R"({"dataset": ")" + store_dir + R"(", "backend": "octree_cgt", "image": {"width": 128, "height": 128},
+        "cache": {"l1": ")" + l1 + R"(", "l2": ")" + l1 + R"("}, "camera": {"eye": [1.6, -1.1, 1.4], "target": [0.5, 0.5, 0.45],
+        "fov_degrees": 35}, "mode": "iso", "values": "normalized", "isosurfaces": [{"value": 0.3}], "shading": {"light": "headlight"}})";
+    return render(parse_scene(text, dir.file("scene.json")), {{"pinned_pages", 8}}, stats);
+  };
+  const FrameBuffers roomy = frame("256MiB");
+  EXPECT_GT(testing::hit_pixels(roomy), 500);
+  // An L1 and an L2 of 1/32 of the octree each (the tiles' 8 pinned pages fit in them): the
+  // same image, its pages fetched again and again.
+  const uint64_t budget = octree.bytes / 32;
+  ASSERT_GE(budget, 2 * 8 * octree.page_bytes) << "room for two tiles' pinned pages";
+  FrameStats stats;
+  const FrameBuffers tight = frame(std::to_string(budget), &stats);
+  EXPECT_EQ(std::memcmp(roomy.color.data(), tight.color.data(), roomy.color.size() * sizeof(Rgbaf)), 0);
+  EXPECT_EQ(std::memcmp(roomy.depth.data(), tight.depth.data(), roomy.depth.size() * sizeof(float)), 0);
+  EXPECT_GT(stats.counters.bricks, budget / octree.page_bytes) << "more page visits than the L1 holds";
+}
+
 TEST_F(OctreeCgt, AGridWithoutAnOctreeIsRefusedBeforeTheFirstFrameNamingTheCommand) {
   const Scene s = scene("grid-only.store", R"("mode": "iso", "isosurfaces": [{"value": 0.0}])");
   try {
