@@ -37,13 +37,15 @@ const OctreeScalars<T>& Tracer<T>::scalars_at(int d, const Vec3s& c) {
 }
 
 /// Voxels lo + {0, 1, 2}^3 of the cap n (lo = 2 n.c), x fastest: the cap's own 8 and its
-/// forward neighbours', one lookup per neighbouring cap. Voxels past the volume's last are
-/// never a corner of a cell; they are left at the cap's first.
+/// forward neighbours', one lookup per neighbouring cap, of the neighbours (bit x + 2y + 4z of
+/// `parts`, 0 the cap itself) asked for. Voxels past the volume's last are never a corner of a
+/// cell; they are left at the cap's first.
 template <typename T>
-void Tracer<T>::cap_block(const Node<T>& n, const Vec3s& lo, double block[27]) {
+void Tracer<T>::cap_block(const Node<T>& n, const Vec3s& lo, double block[27], unsigned parts) {
   const T* own = own_scalars(n);
   const Vec3s all = r.nodes_at[size_t(n.depth)];
   for (int nb = 0; nb < 8; ++nb) {
+    if (!((parts >> nb) & 1u)) continue;
     const Vec3s off{nb & 1, (nb >> 1) & 1, (nb >> 2) & 1};
     const Vec3s cc = n.c + off;
     if (cc.x >= all.x || cc.y >= all.y || cc.z >= all.z) {
@@ -80,10 +82,11 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, 
   const Vec3s hi{std::min(lo.x + 1, dims.x - 2), std::min(lo.y + 1, dims.y - 2), std::min(lo.z + 1, dims.z - 2)};
   if (hi.x < lo.x || hi.y < lo.y || hi.z < lo.z) return;
   const Vec3d o = to_level(p.o);
-  // The cap's voxels and its forward neighbours' (3 x 3 x 3, from up to 8 caps), gathered
-  // once: every cell's corners are read from them.
+  // The cap's voxels and its forward neighbours' (3 x 3 x 3, from up to 8 caps), each
+  // neighbour's gathered once, when the first cell whose corners it holds is visited (a far
+  // view's rays visit a cell or two of a cap): every cell's corners are read from them.
   double block[27];
-  if (r.p.slice) cap_block(n, lo, block);
+  unsigned block_parts = 0;
   double corners[8][8], vlo[8], vhi[8];
   uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
   constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
@@ -120,6 +123,10 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, 
             double& l = vlo[local] = std::numeric_limits<double>::max();
             double& h = vhi[local] = std::numeric_limits<double>::lowest();
             const Vec3s q = cell - lo;
+            // Cell q's corners lie in the neighbours nb with nb's bits among q's.
+            static constexpr uint8_t kCornerParts[8] = {0x01, 0x03, 0x05, 0x0f, 0x11, 0x33, 0x55, 0xff};
+            const unsigned need = kCornerParts[local];
+            if (need & ~block_parts) cap_block(n, lo, block, need & ~block_parts), block_parts |= need;
             for (int m = 0; m < 8; ++m) {
               const double v = block[((q.z + ((m >> 2) & 1)) * 3 + q.y + ((m >> 1) & 1)) * 3 + q.x + (m & 1)];
               corners[local][m] = v, l = std::min(l, v), h = std::max(h, v);

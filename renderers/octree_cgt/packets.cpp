@@ -192,14 +192,17 @@ template <typename T>
 template <int W>
 void Tracer<T>::descend_children(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V) {
   // The half of the children nearer along K first: a lane's hit there is nearer than any
-  // in the far half; within a half, each lane keeps its nearest.
-  const int near = p.forward ? 0 : 1;
-  for (int half : {near, 1 - near})
-    for (int oct = 0; oct < 8; ++oct) {
-      if (((oct >> K) & 1) != half) continue;
-      const Node<T> c = child(n, oct);
-      if (c.depth >= 0) descend_packet<W>(p, c, lanes, K, U, V);
-    }
+  // in the far half. Within a half, front to back for the packet's middle ray along U and V
+  // (for every lane whose ray heads the same way; any other keeps its nearest hit): a lane
+  // that hits in a nearer child leaves the farther ones untested.
+  const bool flip_k = !p.forward;
+  const bool flip_u = p.forward ? p.su_lo + p.su_hi < 0 : p.su_lo + p.su_hi > 0;
+  const bool flip_v = p.forward ? p.sv_lo + p.sv_hi < 0 : p.sv_lo + p.sv_hi > 0;
+  for (int i = 0; i < 8; ++i) {
+    const int oct = ((((i >> 2) & 1) ^ int(flip_k)) << K) | ((((i >> 1) & 1) ^ int(flip_u)) << U) | (((i & 1) ^ int(flip_v)) << V);
+    const Node<T> c = child(n, oct);
+    if (c.depth >= 0) descend_packet<W>(p, c, lanes, K, U, V);
+  }
 }
 
 #define BRICKYARD_OCTREE_CGT_PACKETS(V) template void Tracer<V>::render_packets(const Tile&, int, FrameBuffers&);

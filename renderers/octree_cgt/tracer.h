@@ -178,7 +178,7 @@ struct Tracer {
     path[size_t(n.depth)] = {pages.generation(), n.c, n.page, n.level, n.index};
   }
   const OctreeScalars<T>& scalars_at(int d, const Vec3s& c);
-  void cap_block(const Node<T>& n, const Vec3s& lo, double block[27]);
+  void cap_block(const Node<T>& n, const Vec3s& lo, double block[27], unsigned parts);
   void packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V);
   void single_cells(const Node<T>& n, const Vec3d& o, const Vec3d& d, Interval<double> span, Hit& best);
   double corner(const Vec3s& v, const Node<T>& n, const T* own);
@@ -208,6 +208,7 @@ struct Tracer {
   // --- Single rays and shading (descent.cpp) ---
   void pixel(int x, int y, FrameBuffers& out);
   void shade(const PrimaryRay& ray, const Hit& h, PixelResult& px);
+  Vec3d difference_gradient(const Vec3d& p, int level, bool central);
   Hit trace(const Vec3d& o, const Vec3d& d, Interval<double> span);
   bool in_shadow(const Vec3d& p_world, const Vec3d& l, double light_distance);
   bool descend(const Node<T>& n, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> span, Hit& best);
