@@ -49,13 +49,45 @@ void Tracer<T>::shade(const PrimaryRay& ray, const Hit& h, PixelResult& px) {
   }
   if (!r.ctx.needs_gradients(setup.outputs)) return;
   ++counters.gradients;
-  const Vec3d n = facing_normal(h.normal_voxel / r.geo.spacing, ray.world.dir);
+  const NormalMethod method = r.scene.shading.normals;
+  const Vec3d g = method == NormalMethod::analytic ? h.normal_voxel
+                                                   : difference_gradient(ray.org + ray.dir * h.t, h.level, method == NormalMethod::central);
+  const Vec3d n = facing_normal(g / r.geo.spacing, ray.world.dir);
   if (setup.outputs.normals) px.normal = n;
   if (!r.shading.lit()) return;
   double light_distance;
   const Vec3d l = r.shading.to_light_along(ray.world, h.t, light_distance);
   const bool shadowed = r.scene.shading.casts_shadows() && in_shadow(ray.world.at(h.t), l, light_distance);
   px.color = r.shading.shade(px.color, n, -ray.world.dir, l, shadowed);
+}
+
+/// The gradient at p (finest voxel coordinates) by central or forward differences of the
+/// level-L interpolant one level-L voxel apart, confined to the volume as the reference's are
+/// (cell_accessor.h): the rows and slices beyond a cell's corners are read only here, for
+/// scenes that ask for difference normals.
+template <typename T>
+Vec3d Tracer<T>::difference_gradient(const Vec3d& p, int level, bool central) {
+  const Vec3s dims = r.level_dims[size_t(level)];
+  const double w = double(int64_t(1) << level);
+  const Vec3d q = level ? (p + Vec3d(0.5)) / w - Vec3d(0.5) : p;
+  const double lo[3] = {0, 0, 0};
+  const double hi[3] = {double(dims.x - 1), double(dims.y - 1), double(dims.z - 1)};
+  const auto value = [&](const Vec3d& x) {
+    ++counters.samples;
+    Vec3s i0;
+    double f[3];
+    for (int a = 0; a < 3; ++a) {
+      const double c = std::clamp(x[a], 0.0, hi[a]);
+      i0[a] = std::min<int64_t>(int64_t(std::floor(c)), std::max<int64_t>(dims[a] - 2, 0));
+      f[a] = dims[a] > 1 ? c - double(i0[a]) : 0.0;
+    }
+    double corners[8];
+    for (int m = 0; m < 8; ++m)
+      corners[m] = voxel_at(level, {std::min(i0.x + (m & 1), dims.x - 1), std::min(i0.y + ((m >> 1) & 1), dims.y - 1),
+                                    std::min(i0.z + ((m >> 2) & 1), dims.z - 1)});
+    return trilinear(corners, f[0], f[1], f[2]);
+  };
+  return confined_difference_gradient(q, lo, hi, central, central ? 0.0 : value(q), value) / w;
 }
 
 /// Whether the segment from a hit to the light crosses an isosurface, traced through the

@@ -110,6 +110,7 @@ BackendEntry octree_cgt_backend() {
   e.info.records = {RecordKind::octree_page};
   e.info.modes = {RenderMode::iso};
   e.info.shadows = true;
+  e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
   e.info.params = octree_cgt::params_table().declarations();
   e.info.quality_param = "dpdv";
   e.info.quality_sweep = {4.0, 2.0, 1.0, 0.5, 0.0};

@@ -433,6 +433,12 @@ TEST_F(CostsNothing, DifferenceNormalsFetchOnlyBricksThatCanContribute) {
           EXPECT_THROW(RenderSession(sc, testing::backend_options(backend)), Error);
           continue;
         }
+        if (reads_octree(backend)) {
+          // Octree pages only, no brick; on this sphere every page holds the isovalue, and the
+          // voxels a difference reads beyond a cell's corners lie in the cell's page or the next.
+          expect_octree_pages_hold_the_isovalue(s, sc, backend);
+          continue;
+        }
         const std::set<uint64_t> keys = fetched(sc, backend, FrameOutputs{.depth = true, .normals = true});
         ASSERT_FALSE(keys.empty());
         for (uint64_t code : keys) EXPECT_TRUE(may_contribute(s, sc, BrickKey::from_code(code))) << BrickKey::from_code(code).to_string();

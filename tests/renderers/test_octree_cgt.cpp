@@ -36,6 +36,10 @@ class OctreeCgt : public ::testing::Test {
     make("fbm.store", "fbm", {34, 30, 37}, ValueType::u16);
     make("sphere.store", "sphere", {96, 96, 96}, ValueType::f32);
     make("gyroid.store", "gyroid", {64, 64, 64}, ValueType::f32);
+    // One brick: the reference's difference normals are confined to a brick, octree_cgt's to
+    // the volume.
+    o.brick_size = 64;
+    make("ml-one-brick.store", "marschner-lobb", {41, 38, 35}, ValueType::f32);
     make("grid-only.store", "sphere", {20, 20, 20}, ValueType::f32, false);
   }
   static void TearDownTestSuite() { delete dir_; }
@@ -92,6 +96,33 @@ TEST_F(OctreeCgt, HitsWhereTheReferenceDoesToATenThousandthOfAVoxel) {
     const double voxel = RenderSession(s).context().geometry().voxel_size;
     EXPECT_LT(worst / voxel, 1e-4) << "voxels";
     EXPECT_LT(worst_normal, 1e-3);
+  }
+}
+
+TEST_F(OctreeCgt, DifferenceNormalsAreTheReferencesAndCostOnlyWhenAsked) {
+  const std::string iso = R"("mode": "iso", "isosurfaces": [{"value": 0.5}], )";
+  FrameStats analytic_stats;
+  const FrameBuffers analytic = render(scene("ml-one-brick.store", iso + R"("shading": {"light": "headlight"})"), {}, &analytic_stats);
+  for (const char* method : {"central", "forward"}) {
+    SCOPED_TRACE(method);
+    const Scene s = scene("ml-one-brick.store", iso + R"("shading": {"light": "headlight", "normals": ")" + method + R"("})");
+    FrameStats stats;
+    const FrameBuffers fb = render(s, {}, &stats);
+    const FrameBuffers truth = testing::reference_frame(s);
+    double worst = 0, from_analytic = 0;
+    int hits = 0;
+    for (int y = 0; y < fb.height(); ++y)
+      for (int x = 0; x < fb.width(); ++x) {
+        if (!std::isfinite(fb.depth(x, y)) || !std::isfinite(truth.depth(x, y))) continue;
+        ++hits;
+        worst = std::max(worst, double(length(fb.normal(x, y) - truth.normal(x, y))));
+        from_analytic = std::max(from_analytic, double(length(fb.normal(x, y) - analytic.normal(x, y))));
+      }
+    EXPECT_GT(hits, 300);
+    EXPECT_LT(worst, 1e-3) << "the reference's differences of the same interpolant";
+    EXPECT_GT(from_analytic, 1e-2) << "and not the analytic gradient";
+    // The voxels beyond a cell's corners are looked up only for these normals.
+    EXPECT_GT(stats.counters.samples, analytic_stats.counters.samples);
   }
 }
 
