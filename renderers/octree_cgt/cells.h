@@ -151,8 +151,7 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, 
 /// own major axis (never parallel to its slices).
 template <typename T>
 void Tracer<T>::single_cells(const Node<T>& n, const Vec3d& o, const Vec3d& d, Interval<double> span, Hit& best) {
-  if (!single) single = std::make_unique<Packet>();
-  Packet& p = *single;
+  Packet& p = thread_packet(1);
   const int K = std::abs(d.x) >= std::abs(d.y) && std::abs(d.x) >= std::abs(d.z) ? 0 : std::abs(d.y) >= std::abs(d.z) ? 1 : 2;
   p.lanes = 1;
   p.ray[0].org = o, p.ray[0].dir = d, p.ray[0].span = span;

@@ -75,11 +75,10 @@ bool Tracer<T>::lanes_through(const Packet& p, const Box3d& b, const LaneSet& fr
 
 template <typename T>
 void Tracer<T>::render_packets(const Tile& tile, int size, FrameBuffers& out) {
-  if (!packet) packet = std::make_unique<Packet>();
   for (int y0 = tile.y0; y0 < tile.y1; y0 += size)
     for (int x0 = tile.x0; x0 < tile.x1; x0 += size) {
       // A partial packet at the image's border holds only the pixels that are there.
-      Packet& p = *packet;
+      Packet& p = thread_packet(0);
       p.lanes = 0;
       for (int y = y0; y < std::min(y0 + size, tile.y1); ++y)
         for (int x = x0; x < std::min(x0 + size, tile.x1); ++x) {

@@ -214,8 +214,15 @@ struct Tracer {
   bool descend(const Node<T>& n, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> span, Hit& best);
 
   // --- Packets (packets.cpp) ---
-  std::unique_ptr<Packet> packet;
-  std::unique_ptr<Packet> single;  // the one lane of single_cells()
+  /// A thread's packets, kept across tiles: they are large (every lane's ray and hit), and a
+  /// tile's Tracer is made afresh. 0: render_packets()'s, 1: single_cells()'s one lane (a
+  /// packet's shadow rays and incoherent lanes go down the single-ray descent meanwhile).
+  static Packet& thread_packet(int which) {
+    thread_local std::array<std::unique_ptr<Packet>, 2> packets;
+    std::unique_ptr<Packet>& p = packets[size_t(which)];
+    if (!p) p = std::make_unique<Packet>();
+    return *p;
+  }
   /// Per depth, the lanes whose rays still cross the node being visited there and can still
   /// find a nearer hit in it: a node tests only its parent's lanes.
   std::array<LaneSet, kOctreeMaxDepth + 2> lanes_at{};
