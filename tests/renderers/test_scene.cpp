@@ -121,6 +121,15 @@ TEST(Scene, TheShippedScenesParse) {
     EXPECT_EQ(s.backend, "raymarch") << name;
     EXPECT_EQ(s.width, 512) << name;
   }
+  int scenes = 0;
+  for (const auto& entry : fs::directory_iterator(kSourceDir + "/scenes")) {
+    if (entry.path().extension() != ".json") continue;
+    if (entry.path().filename().string().rfind("flight-", 0) == 0) continue;  // camera paths for brickyard flight
+    SCOPED_TRACE(entry.path().string());
+    EXPECT_NO_THROW(load_scene(entry.path().string()));
+    ++scenes;
+  }
+  EXPECT_GE(scenes, 10);
 }
 
 TEST(Scene, EveryKeyTakesANonDefaultValue) {
