@@ -66,41 +66,96 @@ void Tracer<T>::cap_block(const Node<T>& n, const Vec3s& lo, double block[27], u
   }
 }
 
-/// A cap's cells for the packet: each live lane visits only the cells its ray crosses in
-/// each of the cap's slices along K (at most 2 x 2 a slice: K is the major axis), nearer
-/// slice first, and stops at its first hit; a cell's corners are gathered once, for the
-/// first lane that needs them, and shared by the others.
+/// A leaf's cells at its own level L (0 at the caps), in level coordinates (level-L voxel i
+/// sits at finest coordinate (i + 1/2) 2^L - 1/2; rays keep their parameter t): each cell's
+/// corners gathered once, for the first lane that reaches it, from the cap's 3x3x3 block (its
+/// own voxels and its forward neighbours', each neighbour read when a cell needs it) or, without
+/// slice reuse, by 8 lookups; and whether the cell's range holds an isovalue.
 template <typename T>
-void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V) {
-  // The node's cells at its own level L (0 at the caps): coordinates in level-L voxels, where
-  // voxel i sits at finest coordinate (i + 1/2) 2^L - 1/2; rays keep their parameter t.
-  const int L = r.layout.level_of_depth(n.depth);
-  const double scale = 1.0 / double(int64_t(1) << L);
-  const auto to_level = [&](const Vec3d& x) { return L ? (x + Vec3d(0.5)) * scale - Vec3d(0.5) : x; };
-  const Vec3s dims = r.level_dims[size_t(L)];
-  const Vec3s lo = n.c * int64_t(2);
-  const Vec3s hi{std::min(lo.x + 1, dims.x - 2), std::min(lo.y + 1, dims.y - 2), std::min(lo.z + 1, dims.z - 2)};
-  if (hi.x < lo.x || hi.y < lo.y || hi.z < lo.z) return;
-  const Vec3d o = to_level(p.o);
-  // The cap's voxels and its forward neighbours' (3 x 3 x 3, from up to 8 caps), each
-  // neighbour's gathered once, when the first cell whose corners it holds is visited (a far
-  // view's rays visit a cell or two of a cap): every cell's corners are read from them.
+struct LeafCells {
+  Tracer<T>& t;
+  const Node<T>& n;
+  const int L;
+  const double scale;  // 2^-L
+  Vec3s lo, hi;        // the cells, level-L voxel coordinates
   double block[27];
   unsigned block_parts = 0;
   double corners[8][8], vlo[8], vhi[8];
   uint8_t state[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // 0: not gathered, 1: may cross, 2: culled
-  constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
-  // A coarser +K neighbour: the slab between the two levels' cells, built for the first lane.
-  const int coarse = coarser_neighbour_level(n);
+  const int coarse;  // the +K neighbour's level where it is coarser (transition.h); -1: none
   bool transition_built = false;
+
+  LeafCells(Tracer<T>& tracer, const Node<T>& node)
+      : t(tracer), n(node), L(t.r.layout.level_of_depth(n.depth)), scale(1.0 / double(int64_t(1) << L)),
+        coarse(t.coarser_neighbour_level(n)) {
+    const Vec3s dims = t.r.level_dims[size_t(L)];
+    lo = n.c * int64_t(2);
+    hi = {std::min(lo.x + 1, dims.x - 2), std::min(lo.y + 1, dims.y - 2), std::min(lo.z + 1, dims.z - 2)};
+  }
+  bool empty() const { return hi.x < lo.x || hi.y < lo.y || hi.z < lo.z; }
+  Vec3d to_level(const Vec3d& x) const { return L ? (x + Vec3d(0.5)) * scale - Vec3d(0.5) : x; }
+  static int local(const Vec3s& q) { return int(q.x) | int(q.y << 1) | int(q.z << 2); }
+
+  /// Gathers the corners of `cell` (once); whether its range may hold an isovalue.
+  bool gather(const Vec3s& cell) {
+    const Vec3s q = cell - lo;
+    const int c = local(q);
+    if (state[c] == 0 && !t.r.p.slice) {
+      t.cell_corners(cell, n, t.own_scalars(n), corners[c], vlo[c], vhi[c]);
+      state[c] = t.crosses_corners(vlo[c], vhi[c]) ? 1 : 2;
+    }
+    if (state[c] == 0) {
+      double& l = vlo[c] = std::numeric_limits<double>::max();
+      double& h = vhi[c] = std::numeric_limits<double>::lowest();
+      // Cell q's corners lie in the neighbours nb with nb's bits among q's.
+      static constexpr uint8_t kCornerParts[8] = {0x01, 0x03, 0x05, 0x0f, 0x11, 0x33, 0x55, 0xff};
+      const unsigned need = kCornerParts[c];
+      if (need & ~block_parts) t.cap_block(n, lo, block, need & ~block_parts), block_parts |= need;
+      for (int m = 0; m < 8; ++m) {
+        const double v = block[((q.z + ((m >> 2) & 1)) * 3 + q.y + ((m >> 1) & 1)) * 3 + q.x + (m & 1)];
+        corners[c][m] = v, l = std::min(l, v), h = std::max(h, v);
+      }
+      state[c] = t.crosses_corners(l, h) ? 1 : 2;
+    }
+    return state[c] == 1;
+  }
+
+  /// Lane i's ray against a gathered cell: the nearer root, its level, the lane's float exit.
+  bool intersect(Packet& p, int i, const Vec3s& cell) {
+    const PrimaryRay& ray = p.ray[size_t(i)];
+    const int c = local(cell - lo);
+    const bool found = t.intersect(cell, corners[c], vlo[c], vhi[c], to_level(ray.org), L ? ray.dir * scale : ray.dir,
+                                   L ? p.inv[size_t(i)] / scale : p.inv[size_t(i)], ray.span, p.hit[size_t(i)]);
+    if (found) p.hit[size_t(i)].level = L, p.update_exit(i);
+    return found;
+  }
+
+  /// Lane i's ray against the slab between this leaf and its coarser +K neighbour.
+  void transition(Packet& p, int i) {
+    if (coarse < 0) return;
+    if (!transition_built) t.build_transition(n, coarse, t.transition), transition_built = true;
+    const PrimaryRay& ray = p.ray[size_t(i)];
+    bool found = false;
+    for (int b = 0; b < t.transition.boxes; ++b)
+      found |= t.intersect_box(t.transition.box[size_t(b)], ray.org, ray.dir, p.inv[size_t(i)], ray.span, p.hit[size_t(i)]);
+    if (found) p.hit[size_t(i)].level = L, p.update_exit(i);
+  }
+};
+
+/// A leaf's cells lane by lane: each lane visits only the cells its ray crosses in each of the
+/// leaf's slices along K (at most 2 x 2 a slice: K is the major axis), nearer slice first, and
+/// stops at its first hit. For the single-ray mode and for leaves few lanes reach
+/// (packlet_cells() takes the others).
+template <typename T>
+void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V) {
+  LeafCells<T> leaf(*this, n);
+  if (leaf.empty()) return;
+  const Vec3s lo = leaf.lo, hi = leaf.hi;
+  const Vec3d o = leaf.to_level(p.o);
+  constexpr double kSlack = 1e-9;  // cell ranges are widened: the exact test is intersect()'s
   lanes.for_each([&](int i) {
     const PrimaryRay& ray = p.ray[size_t(i)];
-    Hit& hit = p.hit[size_t(i)];
-    const Vec3d org = to_level(ray.org), dir = L ? ray.dir * scale : ray.dir;
-    const Vec3d inv = L ? p.inv[size_t(i)] / scale : p.inv[size_t(i)];
     const double su = ray.dir[U] * p.inv_dk[size_t(i)], sv = ray.dir[V] * p.inv_dk[size_t(i)];
-    const int surface_before = hit.surface;
-    const double t_before = hit.t;
     for (int64_t step = 0; step <= hi[K] - lo[K]; ++step) {
       const int64_t k = p.forward ? lo[K] + step : hi[K] - step;
       const double s0 = double(k) - o[K], s1 = s0 + 1;
@@ -114,36 +169,11 @@ void Tracer<T>::packet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, 
         for (int64_t b = b0; b <= b1; ++b) {
           Vec3s cell;
           cell[K] = k, cell[U] = a, cell[V] = b;
-          const int local = int(cell.x - lo.x) | int((cell.y - lo.y) << 1) | int((cell.z - lo.z) << 2);
-          if (state[local] == 0 && !r.p.slice) {
-            cell_corners(cell, n, own_scalars(n), corners[local], vlo[local], vhi[local]);
-            state[local] = crosses_corners(vlo[local], vhi[local]) ? 1 : 2;
-          }
-          if (state[local] == 0) {
-            double& l = vlo[local] = std::numeric_limits<double>::max();
-            double& h = vhi[local] = std::numeric_limits<double>::lowest();
-            const Vec3s q = cell - lo;
-            // Cell q's corners lie in the neighbours nb with nb's bits among q's.
-            static constexpr uint8_t kCornerParts[8] = {0x01, 0x03, 0x05, 0x0f, 0x11, 0x33, 0x55, 0xff};
-            const unsigned need = kCornerParts[local];
-            if (need & ~block_parts) cap_block(n, lo, block, need & ~block_parts), block_parts |= need;
-            for (int m = 0; m < 8; ++m) {
-              const double v = block[((q.z + ((m >> 2) & 1)) * 3 + q.y + ((m >> 1) & 1)) * 3 + q.x + (m & 1)];
-              corners[local][m] = v, l = std::min(l, v), h = std::max(h, v);
-            }
-            state[local] = crosses_corners(l, h) ? 1 : 2;
-          }
-          if (state[local] == 2) continue;
-          found |= intersect(cell, corners[local], vlo[local], vhi[local], org, dir, inv, ray.span, hit);
+          if (leaf.gather(cell)) found |= leaf.intersect(p, i, cell);
         }
       if (found) break;  // the next slice is farther along this ray
     }
-    if (coarse >= 0) {
-      if (!transition_built) build_transition(n, coarse, transition), transition_built = true;
-      for (int b = 0; b < transition.boxes; ++b)
-        intersect_box(transition.box[size_t(b)], ray.org, ray.dir, p.inv[size_t(i)], ray.span, hit);
-    }
-    if (hit.t != t_before || hit.surface != surface_before) hit.level = L, p.update_exit(i);
+    leaf.transition(p, i);
   });
 }
 

@@ -179,11 +179,11 @@ void Tracer<T>::descend_packet(Packet& p, const Node<T>& n, const LaneSet& paren
     read.page = page(n.unread_page);
     read.unread_page = 0;
     on_path(read);
-    lod_leaf(read) ? packet_cells(p, read, lanes, K, U, V) : descend_children<W>(p, read, lanes, K, U, V);
+    lod_leaf(read) ? leaf_cells<W>(p, read, lanes, K, U, V) : descend_children<W>(p, read, lanes, K, U, V);
     return;
   }
   on_path(n);
-  if (lod_leaf(n)) return packet_cells(p, n, lanes, K, U, V);
+  if (lod_leaf(n)) return leaf_cells<W>(p, n, lanes, K, U, V);
   descend_children<W>(p, n, lanes, K, U, V);
 }
 
@@ -202,6 +202,41 @@ void Tracer<T>::descend_children(Packet& p, const Node<T>& n, const LaneSet& lan
     const Node<T> c = child(n, oct);
     if (c.depth >= 0) descend_packet<W>(p, c, lanes, K, U, V);
   }
+}
+
+/// A leaf's cells for the lanes that reach it: packlet by packlet where enough do, else lane by
+/// lane (packet_cells(), whose per-lane slice walk costs less for a lane or two).
+template <typename T>
+template <int W>
+void Tracer<T>::leaf_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V) {
+  if (lanes.count() >= kPackletCellsLanes) packlet_cells<W>(p, n, lanes, K, U, V);
+  else packet_cells(p, n, lanes, K, U, V);
+}
+
+/// A leaf's cells, nearer slice along K first, each tested against the lanes a packlet at a
+/// time (lanes_through(): the lanes whose ray crosses the cell before their hit so far), its
+/// corners gathered only if one does, and its cubic solved for those lanes. A lane's hit lowers
+/// its exit, so farther cells no longer take it.
+template <typename T>
+template <int W>
+void Tracer<T>::packlet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V) {
+  LeafCells<T> leaf(*this, n);
+  if (leaf.empty()) return;
+  const double w = double(int64_t(1) << leaf.L);
+  LaneSet crossing;
+  for (int64_t step = 0; step <= leaf.hi[K] - leaf.lo[K]; ++step) {
+    const int64_t k = p.forward ? leaf.lo[K] + step : leaf.hi[K] - step;
+    for (int64_t a = leaf.lo[U]; a <= leaf.hi[U]; ++a)
+      for (int64_t b = leaf.lo[V]; b <= leaf.hi[V]; ++b) {
+        Vec3s cell;
+        cell[K] = k, cell[U] = a, cell[V] = b;
+        Box3d box;
+        for (int x = 0; x < 3; ++x) box.lo[x] = (double(cell[x]) + 0.5) * w - 0.5, box.hi[x] = box.lo[x] + w;
+        if (!lanes_through<W>(p, box, lanes, crossing) || !leaf.gather(cell)) continue;
+        crossing.for_each([&](int i) { leaf.intersect(p, i, cell); });
+      }
+  }
+  if (leaf.coarse >= 0) lanes.for_each([&](int i) { leaf.transition(p, i); });
 }
 
 #define BRICKYARD_OCTREE_CGT_PACKETS(V) template void Tracer<V>::render_packets(const Tile&, int, FrameBuffers&);

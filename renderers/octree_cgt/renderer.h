@@ -43,6 +43,10 @@ inline constexpr int kBuildPackletLanes = 8;
 inline constexpr int kBuildPackletLanes = 4;
 #endif
 
+/// Lanes reaching a leaf from which its cells are tested a packlet at a time rather than lane
+/// by lane.
+inline constexpr int kPackletCellsLanes = 8;
+
 struct Params {
   int packet{};             // rays per side of a packet; 1: the single-ray mode
   int packlet{};            // lanes a packet's tests run on together (4, 8, 16); 0: the build's SIMD width

@@ -62,6 +62,11 @@ struct LaneSet {
       if (w) return true;
     return false;
   }
+  int count() const {
+    int n = 0;
+    for (uint64_t w : words) n += __builtin_popcountll(w);
+    return n;
+  }
   template <typename F>
   void for_each(F&& f) const {
     for (size_t w = 0; w < words.size(); ++w)
@@ -237,6 +242,10 @@ struct Tracer {
   void descend_packet(Packet& p, const Node<T>& n, const LaneSet& parent_lanes, int K, int U, int V);
   template <int W>
   void descend_children(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V);
+  template <int W>
+  void packlet_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V);
+  template <int W>
+  void leaf_cells(Packet& p, const Node<T>& n, const LaneSet& lanes, int K, int U, int V);
 };
 
 }  // namespace brickyard::octree_cgt
