@@ -218,14 +218,8 @@ void Tracer<T>::cell_corners(const Vec3s& cell, const Node<T>& n, const T* cap, 
 template <typename T>
 bool Tracer<T>::intersect(const Vec3s& cell, const double c[8], double lo, double hi, const Vec3d& o, const Vec3d& d,
                const Vec3d& inv, Interval<double> s, Hit& best) {
-  Interval<double> cs = s;
-  for (int a = 0; a < 3; ++a) {
-    double t0 = (double(cell[a]) - o[a]) * inv[a], t1 = (double(cell[a] + 1) - o[a]) * inv[a];
-    if (t0 > t1) std::swap(t0, t1);
-    if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();
-    if (std::isnan(t1)) t1 = std::numeric_limits<double>::infinity();
-    cs.t0 = std::max(cs.t0, t0), cs.t1 = std::min(cs.t1, t1);
-  }
+  const Vec3d cell_lo{double(cell.x), double(cell.y), double(cell.z)};
+  const Interval<double> cs = clip_to_box(s, cell_lo, cell_lo + Vec3d(1.0), o, inv);
   if (cs.t0 > cs.t1 || cs.t0 >= best.t) return false;
   ++counters.cells;
   bool found = false;

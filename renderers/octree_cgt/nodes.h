@@ -52,18 +52,8 @@ double Tracer<T>::lod_reach(const Node<T>& n) const {
 /// last voxel (a cell's upper corner lies in the next node).
 template <typename T>
 Interval<double> Tracer<T>::node_span(const Node<T>& n, const Vec3d& o, const Vec3d& inv, Interval<double> span) const {
-  const int64_t w = width(n.depth);
-  const double reach = lod_reach(n);
-  Interval<double> s = span;
-  for (int a = 0; a < 3; ++a) {
-    const double lo = double(n.c[a] * w), hi = std::min(double((n.c[a] + 1) * w) + reach, double(r.layout.dims[a] - 1));
-    double t0 = (lo - o[a]) * inv[a], t1 = (hi - o[a]) * inv[a];
-    if (t0 > t1) std::swap(t0, t1);
-    if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();  // on a face, parallel to it
-    if (std::isnan(t1)) t1 = std::numeric_limits<double>::infinity();
-    s.t0 = std::max(s.t0, t0), s.t1 = std::min(s.t1, t1);
-  }
-  return s;
+  const Box3d box = node_box(n);
+  return clip_to_box(span, box.lo, box.hi, o, inv);
 }
 
 /// The box of a node's cells, as node_span() clips rays to it.

@@ -48,6 +48,19 @@ struct Node {
   }
 };
 
+/// The part of span where the ray o + t d (inv = 1 / d) is inside the box [lo, hi]. A ray on
+/// a face and parallel to it (0 * inf: NaN) stays inside along that axis.
+inline Interval<double> clip_to_box(Interval<double> span, const Vec3d& lo, const Vec3d& hi, const Vec3d& o, const Vec3d& inv) {
+  for (int a = 0; a < 3; ++a) {
+    double t0 = (lo[a] - o[a]) * inv[a], t1 = (hi[a] - o[a]) * inv[a];
+    if (t0 > t1) std::swap(t0, t1);
+    if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();
+    if (std::isnan(t1)) t1 = std::numeric_limits<double>::infinity();
+    span.t0 = std::max(span.t0, t0), span.t1 = std::min(span.t1, t1);
+  }
+  return span;
+}
+
 constexpr int kMaxLanes = 16 * 16;
 
 /// Lanes of a packet as bits: lane i is bit i % 64 of word i / 64, so that a packlet of W

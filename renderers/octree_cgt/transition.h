@@ -123,14 +123,7 @@ template <typename T>
 bool Tracer<T>::intersect_box(const TransitionBox& box, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> s,
                               Hit& best) {
   if (!crosses_corners(box.vlo, box.vhi)) return false;
-  Interval<double> cs = s;
-  for (int a = 0; a < 3; ++a) {
-    double t0 = (box.lo[a] - o[a]) * inv[a], t1 = (box.hi[a] - o[a]) * inv[a];
-    if (t0 > t1) std::swap(t0, t1);
-    if (std::isnan(t0)) t0 = -std::numeric_limits<double>::infinity();
-    if (std::isnan(t1)) t1 = std::numeric_limits<double>::infinity();
-    cs.t0 = std::max(cs.t0, t0), cs.t1 = std::min(cs.t1, t1);
-  }
+  const Interval<double> cs = clip_to_box(s, box.lo, box.hi, o, inv);
   if (cs.t0 > cs.t1 || cs.t0 >= best.t) return false;
   ++counters.cells;
   const Vec3d extent = box.hi - box.lo;
