@@ -136,21 +136,15 @@ struct Tracer {
   /// Width in finest voxels of a node at depth d.
   int64_t width(int d) const { return int64_t(1) << (r.layout.depth - d); }
 
+  bool holds_isovalue(double lo, double hi) const {
+    for (double iso : r.iso)
+      if (iso >= lo && iso <= hi) return true;
+    return false;
+  }
   /// Whether a node's (or page's) range holds an isovalue; always, without macrocell culling.
-  bool crosses(float lo, float hi) const {
-    if (!r.p.mcell) return true;
-    for (double iso : r.iso)
-      if (iso >= lo && iso <= hi) return true;
-    return false;
-  }
-
+  bool crosses(float lo, float hi) const { return !r.p.mcell || holds_isovalue(lo, hi); }
   /// Whether a cell's corner range holds an isovalue; always, without cell culling.
-  bool crosses_corners(double lo, double hi) const {
-    if (!r.p.cell) return true;
-    for (double iso : r.iso)
-      if (iso >= lo && iso <= hi) return true;
-    return false;
-  }
+  bool crosses_corners(double lo, double hi) const { return !r.p.cell || holds_isovalue(lo, hi); }
 
   /// A node's own 8 scalars (null for one inside a consolidated subtree: its value is n.constant).
   const T* own_scalars(const Node<T>& n) const {

@@ -13,6 +13,7 @@
 /// cells overlap the leaf's instead: nearest hit wins, no gap.) Part of Tracer (tracer.h).
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "renderers/octree_cgt/tracer.h"
@@ -53,16 +54,40 @@ void Tracer<T>::build_transition(const Node<T>& n, int coarse, Transition& out) 
   const int64_t kc = ((n.c[K] + 1) * width(n.depth)) >> coarse;      // and its first level-C slice
   if (kf >= fine_dims[K] || kc >= coarse_dims[K]) return;
   const double s_near = centre(kf, fine_w), s_far = centre(kc, coarse_w);
+  // Each box corner reads 4 voxels of one face; the faces' few voxels (3 x 3 of the near one,
+  // as many of the far one) are read once each.
+  std::array<double, 9> fine{};
+  std::array<bool, 9> have_fine{};
+  const auto fine_voxel = [&](int64_t a, int64_t b) {
+    const size_t m = size_t((a - 2 * n.c[U]) * 3 + (b - 2 * n.c[V]));
+    if (!have_fine[m]) {
+      Vec3s x;
+      x[K] = kf, x[U] = a, x[V] = b;
+      fine[m] = voxel_at(L, x), have_fine[m] = true;
+    }
+    return fine[m];
+  };
+  struct CoarseVoxel {
+    int64_t u, v;
+    double value;
+  };
+  std::array<CoarseVoxel, 16> coarse_read{};
+  size_t coarse_reads = 0;
+  const auto coarse_voxel = [&](int64_t u, int64_t v) {
+    for (size_t m = 0; m < coarse_reads; ++m)
+      if (coarse_read[m].u == u && coarse_read[m].v == v) return coarse_read[m].value;
+    Vec3s x;
+    x[K] = kc, x[U] = u, x[V] = v;
+    const double value = voxel_at(coarse, x);
+    if (coarse_reads < coarse_read.size()) coarse_read[coarse_reads++] = {u, v, value};
+    return value;
+  };
   // The level-L voxels' bilinear interpolant on the near face, inside the column (a, b).
   const auto near_value = [&](int64_t a, int64_t b, double u, double v) {
     const double fu = (u - centre(a, fine_w)) / fine_w, fv = (v - centre(b, fine_w)) / fine_w;
     double c[2][2];
     for (int i = 0; i < 2; ++i)
-      for (int j = 0; j < 2; ++j) {
-        Vec3s x;
-        x[K] = kf, x[U] = a + i, x[V] = b + j;
-        c[i][j] = voxel_at(L, x);
-      }
+      for (int j = 0; j < 2; ++j) c[i][j] = fine_voxel(a + i, b + j);
     return (1 - fv) * ((1 - fu) * c[0][0] + fu * c[1][0]) + fv * ((1 - fu) * c[0][1] + fu * c[1][1]);
   };
   // The level-C voxels' bilinear interpolant on the far face (clamped at the volume's edges).
@@ -79,11 +104,7 @@ void Tracer<T>::build_transition(const Node<T>& n, int coarse, Transition& out) 
     }
     double c[2][2];
     for (int i = 0; i < 2; ++i)
-      for (int j = 0; j < 2; ++j) {
-        Vec3s x;
-        x[K] = kc, x[U] = std::min(i0[0] + i, coarse_dims[U] - 1), x[V] = std::min(i0[1] + j, coarse_dims[V] - 1);
-        c[i][j] = voxel_at(coarse, x);
-      }
+      for (int j = 0; j < 2; ++j) c[i][j] = coarse_voxel(std::min(i0[0] + i, coarse_dims[U] - 1), std::min(i0[1] + j, coarse_dims[V] - 1));
     return (1 - w[1]) * ((1 - w[0]) * c[0][0] + w[0] * c[1][0]) + w[1] * ((1 - w[0]) * c[0][1] + w[0] * c[1][1]);
   };
   // Where a column's side [lo, hi] (finest coordinates) is cut: at the coarse voxel centre
