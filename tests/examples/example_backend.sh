@@ -21,7 +21,10 @@ cat > "$work/mip.json" <<'SCENE'
 {"dataset": "ml.store", "backend": "example-mip", "mode": "mip", "image": {"width": 64, "height": 64},
  "camera": {"eye": [1.8, -1.2, 1.4], "target": [0.5, 0.5, 0.5], "fov_degrees": 40}}
 SCENE
-"$by" --module "$module" render --list-backends | grep -q "example-mip  (mip; structured)"
+# Listed: read the whole listing first (grep -q stops at its match, and the lister, still
+# writing, would die of SIGPIPE under pipefail).
+listing=$("$by" --module "$module" render --list-backends)
+grep -q "example-mip  (mip; structured)" <<<"$listing"
 example=$("$by" --module "$module" render "$work/mip.json" --set step=0.25 -o "$work/example.png" --error-maps "$work/maps")
 baseline=$("$by" render "$work/mip.json" --backend raymarch --set step=0.25 -o "$work/raymarch.png" --error-maps "$work/maps")
 echo "$example"
