@@ -9,27 +9,33 @@
 namespace brickyard {
 
 namespace {
-constexpr size_t kHeaderBytes = 2 * sizeof(uint32_t);
+constexpr size_t kHeaderBytes = 4 * sizeof(uint32_t);
 }  // namespace
 
-size_t TetClusterPage::bytes(uint32_t vertices, uint32_t tets) {
-  return kHeaderBytes + size_t(vertices) * 4 * sizeof(float) + size_t(tets) * 4 * sizeof(uint32_t);
+size_t TetClusterPage::bytes(uint32_t vertices, uint32_t tets, uint32_t steps, uint32_t position_sets) {
+  return kHeaderBytes + size_t(vertices) * (3 * size_t(position_sets) + size_t(steps)) * sizeof(float) +
+         size_t(tets) * 4 * sizeof(uint32_t);
 }
 
 std::vector<std::byte> TetClusterPage::encode(std::span<const float> positions, std::span<const float> values,
-                                              std::span<const uint32_t> corners) {
-  if (positions.size() != 3 * values.size() || corners.size() % 4 != 0)
-    throw Error(Errc::invalid_argument, fmt::format("a cluster of {} positions, {} values and {} corner indices is not "
-                                                    "3 floats and 1 value a vertex, 4 indices a tetrahedron",
-                                                    positions.size(), values.size(), corners.size()));
-  const auto vertices = uint32_t(values.size()), tets = uint32_t(corners.size() / 4);
+                                              std::span<const uint32_t> corners, uint32_t steps) {
+  const size_t vertex_count = steps ? values.size() / steps : 0;
+  const bool fits = steps >= 1 && values.size() % steps == 0 && corners.size() % 4 == 0 &&
+                    (positions.size() == 3 * vertex_count || positions.size() == 3 * vertex_count * steps);
+  if (!fits)
+    throw Error(Errc::invalid_argument, fmt::format("a cluster of {} positions, {} values, {} steps and {} corner indices is "
+                                                    "not 3 floats a vertex (once or per step), 1 value a vertex and step, "
+                                                    "4 indices a tetrahedron",
+                                                    positions.size(), values.size(), steps, corners.size()));
+  const auto vertices = uint32_t(vertex_count), tets = uint32_t(corners.size() / 4);
+  const uint32_t position_sets = positions.size() == 3 * vertex_count ? 1 : steps;
   for (uint32_t c : corners)
     if (c >= vertices)
       throw Error(Errc::invalid_argument, fmt::format("corner index {} is outside the cluster's {} vertices", c, vertices));
-  std::vector<std::byte> page(bytes(vertices, tets));
+  std::vector<std::byte> page(bytes(vertices, tets, steps, position_sets));
   std::byte* p = page.data();
-  std::memcpy(p, &vertices, sizeof vertices);
-  std::memcpy(p + sizeof vertices, &tets, sizeof tets);
+  const uint32_t header[4] = {vertices, tets, steps, position_sets};
+  std::memcpy(p, header, sizeof header);
   p += kHeaderBytes;
   std::memcpy(p, positions.data(), positions.size_bytes());
   p += positions.size_bytes();
@@ -42,17 +48,20 @@ std::vector<std::byte> TetClusterPage::encode(std::span<const float> positions, 
 TetClusterPage TetClusterPage::view(std::span<const std::byte> page) {
   TetClusterPage v;
   if (page.size() < kHeaderBytes) throw Error(Errc::corrupt, fmt::format("a cluster page of {} bytes has no header", page.size()));
-  std::memcpy(&v.vertex_count, page.data(), sizeof v.vertex_count);
-  std::memcpy(&v.tet_count, page.data() + sizeof v.vertex_count, sizeof v.tet_count);
-  if (bytes(v.vertex_count, v.tet_count) > page.size())
-    throw Error(Errc::corrupt, fmt::format("a cluster page of {} bytes cannot hold {} vertices and {} tetrahedra",
-                                           page.size(), v.vertex_count, v.tet_count));
+  uint32_t header[4];
+  std::memcpy(header, page.data(), sizeof header);
+  v.vertex_count = header[0], v.tet_count = header[1], v.steps = header[2], v.position_sets = header[3];
+  if (v.steps < 1 || (v.position_sets != 1 && v.position_sets != v.steps))
+    throw Error(Errc::corrupt, fmt::format("a cluster page of {} steps and {} position sets", v.steps, v.position_sets));
+  if (bytes(v.vertex_count, v.tet_count, v.steps, v.position_sets) > page.size())
+    throw Error(Errc::corrupt, fmt::format("a cluster page of {} bytes cannot hold {} vertices and {} tetrahedra in {} steps",
+                                           page.size(), v.vertex_count, v.tet_count, v.steps));
   // The page buffers come from new[] or the cache's pool (aligned to 64 bytes), and every part
   // is a multiple of 4 bytes, so the arrays are aligned for their types.
   const std::byte* p = page.data() + kHeaderBytes;
   v.positions = reinterpret_cast<const float*>(p);
-  v.values = v.positions + 3 * size_t(v.vertex_count);
-  v.corners = reinterpret_cast<const uint32_t*>(v.values + v.vertex_count);
+  v.values = v.positions + 3 * size_t(v.vertex_count) * v.position_sets;
+  v.corners = reinterpret_cast<const uint32_t*>(v.values + size_t(v.vertex_count) * v.steps);
   return v;
 }
 

@@ -148,8 +148,35 @@ class Gyroid final : public FieldBase<Gyroid> {
   double periods_, w_ = 0.0;
 };
 
+/// A linear function a . p + b: every isosurface is a plane, exactly reproduced by linear
+/// interpolation on any tetrahedral mesh and by trilinear interpolation on any grid (the
+/// tetrahedral reference's exactness oracle).
+class LinearField final : public FieldBase<LinearField> {
+ public:
+  explicit LinearField(FieldParamReader& p)
+      : a_(p.get("ax", 1.0, "x coefficient"), p.get("ay", 0.5, "y coefficient"), p.get("az", 0.25, "z coefficient")),
+        b_(p.get("b", 0.0, "constant term")) {
+    params_ = p.declared();
+  }
+  std::string_view name() const override { return "linear"; }
+  Box3d domain() const override { return {Vec3d(0.0), Vec3d(1.0)}; }
+  ValueRange range() const override {
+    double lo = b_, hi = b_;
+    for (int i = 0; i < 3; ++i) lo += std::min(0.0, a_[i]), hi += std::max(0.0, a_[i]);
+    return {lo, hi};
+  }
+  bool has_analytic_gradient() const override { return true; }
+  double eval(const Vec3d& p) const { return a_.x * p.x + a_.y * p.y + a_.z * p.z + b_; }
+  Vec3d gradient(const Vec3d&) const override { return a_; }
+
+ private:
+  Vec3d a_;
+  double b_;
+};
+
 }  // namespace
 
+std::unique_ptr<Field> make_linear(FieldParamReader& p) { return std::make_unique<LinearField>(p); }
 std::unique_ptr<Field> make_marschner_lobb(FieldParamReader& p) { return std::make_unique<MarschnerLobb>(p); }
 std::unique_ptr<Field> make_sphere_sdf(FieldParamReader& p) { return std::make_unique<SphereSdf>(p); }
 std::unique_ptr<Field> make_torus_sdf(FieldParamReader& p) { return std::make_unique<TorusSdf>(p); }

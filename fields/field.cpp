@@ -72,6 +72,7 @@ const Entry kFields[] = {
     {"fbm", "fractal Brownian motion of gradient noise: turbulent, high entropy", make_fbm},
     {"menger", "Menger sponge occupancy (1 solid, 0 empty): large empty regions, self-similar", make_menger},
     {"sparse-blobs", "clusters of smooth blobs in an exactly constant (0) background", make_sparse_blobs},
+    {"linear", "a linear function a . p + b: planar isosurfaces, exact on any mesh or grid", make_linear},
     {"wavelet", "VTK's wavelet (vtkRTAnalyticSource) on [-1/2,1/2]^3: f32 grids equal VTK's bit for bit", make_wavelet},
 };
 }  // namespace

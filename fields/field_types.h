@@ -9,6 +9,7 @@ namespace brickyard {
 
 std::unique_ptr<Field> make_marschner_lobb(FieldParamReader& params);
 std::unique_ptr<Field> make_sphere_sdf(FieldParamReader& params);
+std::unique_ptr<Field> make_linear(FieldParamReader& params);
 std::unique_ptr<Field> make_torus_sdf(FieldParamReader& params);
 std::unique_ptr<Field> make_gyroid(FieldParamReader& params);
 std::unique_ptr<Field> make_fbm(FieldParamReader& params);

@@ -466,15 +466,8 @@ void validate(const BuildOptions& o) {
 
 }  // namespace
 
-BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options, Progress* progress) {
-  validate(options);
-  Stopwatch watch;
-  BuildResult result;
-  const GridLayout layout = GridLayout::make(source.dims(), options.brick_size);
-  const std::string source_json = source.describe_json();
-  const std::string build_json = build_params_json(options, source.background());
-
-  // Decide what to do with whatever is at `dir`.
+bool prepare_store_directory(const std::string& dir, const std::string& source_json, const std::string& build_json,
+                             bool force, BuildResult& result) {
   switch (probe_store(dir)) {
     case StoreState::absent: break;
     case StoreState::not_a_store:
@@ -492,12 +485,12 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
         if (j.is_object()) j.erase("generator");
         return j.dump();
       };
-      if (identity(old.source) == identity(source_json) && old.build == build_json && !options.force) {
+      if (identity(old.source) == identity(source_json) && old.build == build_json && !force) {
         result.manifest = old;
         result.up_to_date = true;
-        return result;
+        return true;
       }
-      if (!options.force)
+      if (!force)
         throw Error(Errc::invalid_argument,
                     "a complete store from a different source or with different parameters is there; "
                     "pass --force to rebuild it")
@@ -506,6 +499,18 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
       break;
     }
   }
+  return false;
+}
+
+BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options, Progress* progress) {
+  validate(options);
+  Stopwatch watch;
+  BuildResult result;
+  const GridLayout layout = GridLayout::make(source.dims(), options.brick_size);
+  const std::string source_json = source.describe_json();
+  const std::string build_json = build_params_json(options, source.background());
+
+  if (prepare_store_directory(dir, source_json, build_json, options.force, result)) return result;
 
   BrickFormat format;
   format.type = source.type();

@@ -61,6 +61,14 @@ struct BuildResult {
   uint64_t stored_bytes = 0;
 };
 
+/// @brief Decides what to do with whatever is at `dir` before a build: nothing there goes
+/// ahead; an incomplete store is removed (result.rebuilt_incomplete); a complete one from the
+/// same source and parameters is left alone (returns true: up to date, result.manifest is
+/// its manifest) unless `force`, in which case, as for a different one, it is removed; a
+/// different complete store without `force` and anything that is not a store are refused.
+bool prepare_store_directory(const std::string& dir, const std::string& source_json, const std::string& build_json,
+                             bool force, BuildResult& result);
+
 /// @brief Builds (or rebuilds) the store in `dir` from `source`.
 /// @throws Error naming the source or the store; a failed build leaves an incomplete store.
 BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options,

@@ -97,6 +97,11 @@ RenderSession::RenderSession(const Scene& scene, const Options& options)
                                                     to_string(scene_.mode), to_string(dataset.kind())))
         .with_file(scene_.file)
         .with_field("mode");
+  if (scene_.time_step >= dataset.info().time_steps)
+    throw Error(Errc::invalid_argument, fmt::format("time step {} of a dataset with {} (0 to {})", scene_.time_step,
+                                                    dataset.info().time_steps, dataset.info().time_steps - 1))
+        .with_file(scene_.file)
+        .with_field("time_step");
   normalize_values(scene_, dataset.info().min_value, dataset.info().max_value);
   build_cache();
 }

@@ -43,7 +43,8 @@ std::string Manifest::to_json() const {
   j["build"] = json::parse(build);
   if (kind == DataKind::tetrahedral) {
     j["mesh"] = {{"bounds", {{mesh.bounds.lo.x, mesh.bounds.lo.y, mesh.bounds.lo.z}, {mesh.bounds.hi.x, mesh.bounds.hi.y, mesh.bounds.hi.z}}},
-                 {"clusters", mesh.clusters}, {"tets", mesh.tets}, {"vertices", mesh.vertices}, {"page_bytes", mesh.page_bytes}};
+                 {"clusters", mesh.clusters}, {"tets", mesh.tets}, {"vertices", mesh.vertices}, {"page_bytes", mesh.page_bytes},
+                 {"moving", mesh.moving}};
     return j.dump(2);
   }
   j["dims"] = {dims.x, dims.y, dims.z};
@@ -155,6 +156,7 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
     m.mesh.tets = rm.get<uint64_t>("tets");
     m.mesh.vertices = rm.get<uint64_t>("vertices");
     m.mesh.page_bytes = rm.get<uint64_t>("page_bytes");
+    if (mesh.contains("moving")) m.mesh.moving = rm.get<bool>("moving");
     return m;
   }
   m.dims = r.vec3<int64_t>("dims");

@@ -46,6 +46,9 @@ struct MeshSummary {
   Box3d bounds;              ///< every vertex, world coordinates
   uint64_t clusters = 0, tets = 0, vertices = 0;
   uint64_t page_bytes = 0;   ///< the decoded size of every cluster page (the largest cluster's)
+  bool moving = false;       ///< vertices move: pages hold positions for every time step
+  /// Cluster pages' position sets: one, or one per time step.
+  uint32_t position_sets(int time_steps) const { return moving ? uint32_t(time_steps) : 1u; }
 };
 
 struct Manifest {

@@ -39,6 +39,10 @@ std::array<std::byte, 8> big_endian_id(uint64_t id) {
   return out;
 }
 
+/// The per-time-step range chunks sit in the cluster table's database after its own chunks.
+constexpr uint64_t kStepRangesKey = uint64_t(0x01) << 56;
+std::array<std::byte, 8> step_ranges_key(uint64_t chunk) { return big_endian_id(kStepRangesKey | chunk); }
+
 uint64_t id_from_big_endian(lmdb::Bytes key) {
   uint64_t id = 0;
   for (std::byte b : key) id = (id << 8) | uint64_t(b);
@@ -167,7 +171,8 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
     const double volume = std::max(e.x, 1e-300) * std::max(e.y, 1e-300) * std::max(e.z, 1e-300);
     info.unit_length = manifest_.mesh.tets ? std::cbrt(volume / double(manifest_.mesh.tets)) : 1.0;
     dataset_ = std::make_unique<Dataset>(std::move(info), std::nullopt,
-                                         TetView(clusters_, size_t(manifest_.mesh.page_bytes)));
+                                         TetView(clusters_, size_t(manifest_.mesh.page_bytes), manifest_.time_steps,
+                                                 step_ranges_));
     return;
   }
   load_node_table();
@@ -254,8 +259,23 @@ void Store::load_cluster_table() {
           .with_file(dir);
     std::memcpy(clusters_.data() + start, value->data(), value->size());
   }
+  if (manifest_.time_steps > 1) {
+    const size_t per_chunk = kNodesPerChunk, steps = size_t(manifest_.time_steps);
+    step_ranges_.resize(clusters_.size() * steps);
+    for (size_t start = 0, chunk = 0; start < step_ranges_.size(); start += per_chunk, ++chunk) {
+      auto value = txn.get(clusters_db_, step_ranges_key(chunk));
+      const size_t n = std::min(per_chunk, step_ranges_.size() - start);
+      if (!value || value->size() != n * sizeof(TetStepRange))
+        throw Error(Errc::corrupt, fmt::format("time-step range chunk {} is {}", chunk,
+                                               value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(TetStepRange))
+                                                     : "missing"))
+            .with_file(dir);
+      std::memcpy(step_ranges_.data() + start, value->data(), value->size());
+    }
+  }
+  const uint32_t steps = uint32_t(manifest_.time_steps), sets = manifest_.mesh.position_sets(manifest_.time_steps);
   for (size_t c = 0; c < clusters_.size(); ++c)
-    if (TetClusterPage::bytes(clusters_[c].vertices, clusters_[c].tets) > manifest_.mesh.page_bytes)
+    if (TetClusterPage::bytes(clusters_[c].vertices, clusters_[c].tets, steps, sets) > manifest_.mesh.page_bytes)
       throw Error(Errc::corrupt, fmt::format("cluster {} of {} vertices and {} tetrahedra does not fit the store's "
                                              "{}-byte pages", c, clusters_[c].vertices, clusters_[c].tets,
                                              manifest_.mesh.page_bytes))
@@ -364,9 +384,11 @@ PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::spa
     throw;
   }
   const TetCluster& c = clusters_[key.id];
-  if (used != TetClusterPage::bytes(c.vertices, c.tets))
+  const size_t expected = TetClusterPage::bytes(c.vertices, c.tets, uint32_t(manifest_.time_steps),
+                                                manifest_.mesh.position_sets(manifest_.time_steps));
+  if (used != expected)
     throw Error(Errc::corrupt, fmt::format("cluster page holds {} bytes, its table entry ({} vertices, {} tetrahedra) {}",
-                                           used, c.vertices, c.tets, TetClusterPage::bytes(c.vertices, c.tets)))
+                                           used, c.vertices, c.tets, expected))
         .with_file(path_)
         .with_key(describe(key));
   read.decode_ns = elapsed_ns(start);
@@ -475,6 +497,11 @@ void StoreWriter::put_cluster(uint64_t cluster, std::span<const std::byte> page)
   writer_->put(tets_db_, big_endian_id(cluster), encode_page({RecordKind::tet_cluster, cluster}, page));
 }
 
+void StoreWriter::put_cluster_record(uint64_t cluster, std::vector<std::byte>&& record) {
+  BY_CHECK(kind_ == DataKind::tetrahedral);
+  writer_->put(tets_db_, big_endian_id(cluster), std::move(record));
+}
+
 void StoreWriter::finish(const Manifest& final_manifest, const NodeTable& nodes) {
   BY_CHECK(kind_ == DataKind::structured && final_manifest.kind == DataKind::structured);
   writer_->commit();
@@ -492,7 +519,9 @@ void StoreWriter::finish(const Manifest& final_manifest, const NodeTable& nodes)
   commit_final(final_manifest);
 }
 
-void StoreWriter::finish(const Manifest& final_manifest, const std::vector<TetCluster>& clusters) {
+void StoreWriter::finish(const Manifest& final_manifest, const std::vector<TetCluster>& clusters,
+                         const std::vector<TetStepRange>& step_ranges) {
+  BY_CHECK(final_manifest.time_steps == 1 || step_ranges.size() == clusters.size() * size_t(final_manifest.time_steps));
   BY_CHECK(kind_ == DataKind::tetrahedral && final_manifest.kind == DataKind::tetrahedral);
   BY_CHECK_EQ(final_manifest.mesh.clusters, uint64_t(clusters.size()));
   writer_->commit();
@@ -502,6 +531,12 @@ void StoreWriter::finish(const Manifest& final_manifest, const std::vector<TetCl
     const auto* bytes = reinterpret_cast<const std::byte*>(clusters.data() + start);
     writer_->put(clusters_db_, big_endian_id(chunk), std::span<const std::byte>(bytes, n * sizeof(TetCluster)));
   }
+  if (final_manifest.time_steps > 1)
+    for (size_t start = 0, chunk = 0; start < step_ranges.size(); start += kNodesPerChunk, ++chunk) {
+      const size_t n = std::min(kNodesPerChunk, step_ranges.size() - start);
+      const auto* bytes = reinterpret_cast<const std::byte*>(step_ranges.data() + start);
+      writer_->put(clusters_db_, step_ranges_key(chunk), std::span<const std::byte>(bytes, n * sizeof(TetStepRange)));
+    }
   Manifest m = final_manifest;
   m.format_version = std::max(m.format_version, kStoreFormatVersion);
   commit_final(m);

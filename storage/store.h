@@ -78,6 +78,8 @@ class Store : public PageSource {
   const NodeTable& nodes() const { return nodes_; }
   // Tetrahedral stores:
   const std::vector<TetCluster>& clusters() const { return clusters_; }
+  /// @brief Clusters x steps scalar ranges (cluster-major); empty for one time step.
+  const std::vector<TetStepRange>& step_ranges() const { return step_ranges_; }
   // Grid stores with an octree volume:
   bool has_octree() const { return manifest_.octree.has_value(); }
   const std::vector<OctreePageRange>& octree_pages() const { return octree_pages_; }
@@ -124,6 +126,7 @@ class Store : public PageSource {
   GridLayout layout_;
   NodeTable nodes_;
   std::vector<TetCluster> clusters_;
+  std::vector<TetStepRange> step_ranges_;
   std::vector<OctreePageRange> octree_pages_;
   std::unique_ptr<Dataset> dataset_;
 };
@@ -142,8 +145,12 @@ class StoreWriter {
   void put_brick(const BrickKey& key, std::vector<std::byte>&& record);
   /// @brief A tetrahedral store's cluster page (its used bytes; encoded here).
   void put_cluster(uint64_t cluster, std::span<const std::byte> page);
+  /// @brief A cluster page already encoded (encode_page), for builders that compress in parallel.
+  void put_cluster_record(uint64_t cluster, std::vector<std::byte>&& record);
   void finish(const Manifest& final_manifest, const NodeTable& nodes);
-  void finish(const Manifest& final_manifest, const std::vector<TetCluster>& clusters);
+  /// @param step_ranges  clusters x time steps ranges (cluster-major) for more than one step.
+  void finish(const Manifest& final_manifest, const std::vector<TetCluster>& clusters,
+              const std::vector<TetStepRange>& step_ranges = {});
 
   lmdb::Env& env() { return *env_; }
   uint64_t bytes_written() const { return writer_->committed_bytes() + writer_->pending_bytes(); }

@@ -211,6 +211,7 @@ Scene read_scene(const nlohmann::json& j, const std::string& file) {
   if (s.mode == RenderMode::dvr && s.transfer_function.empty())
     throw top.error("transfer_function", "dvr mode needs a transfer function");
   s.sampling_rate = top.number("sampling_rate", 1.0, 1e-3, 1e3);
+  s.time_step = int(top.integer("time_step", 0, 0, 1 << 20));
   read_shading(top, s);
   if (s.shading.shadows && s.mode != RenderMode::iso)
     throw top.error("shading.shadows", "shadows are cast in iso mode only");

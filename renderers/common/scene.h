@@ -76,6 +76,7 @@ struct Scene {
   std::vector<Isosurface> isosurfaces;  ///< 1 to 4 for iso mode
   TransferFunction transfer_function;   ///< DVR and MIP colour
   double sampling_rate = 1.0;           ///< DVR: samples per voxel relative to the back end's default
+  int time_step = 0;                    ///< the dataset's time step to draw (checked when it opens)
   Shading shading;
   std::optional<Box3d> clip;            ///< normalised coordinates
   Vec3f background{0.0f};

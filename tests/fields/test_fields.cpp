@@ -33,7 +33,7 @@ Vec3d central_difference(const Field& f, const Vec3d& p, double h) {
 
 TEST(FieldRegistry, ListsEveryFieldAndRejectsUnknownNames) {
   const std::vector<std::string> expected = {"marschner-lobb", "sphere", "torus", "gyroid",
-                                             "fbm", "menger", "sparse-blobs", "wavelet"};
+                                             "fbm", "menger", "sparse-blobs", "linear", "wavelet"};
   EXPECT_EQ(field_names(), expected);
   for (const auto& info : field_catalog()) {
     EXPECT_FALSE(info.description.empty());

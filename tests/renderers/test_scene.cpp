@@ -148,6 +148,7 @@ TEST(Scene, EveryKeyTakesANonDefaultValue) {
                        { "value": 3 }, { "value": 4.25, "color": [0, 0, 0] } ],
       "transfer_function": { "points": [ { "value": 0, "opacity": 0 }, { "value": 1, "color": [0.5, 0.25, 0], "opacity": 1 } ] },
       "sampling_rate": 2.5,
+      "time_step": 3,
       "shading": { "light": "directional", "light_position": [1, 2, 3], "light_direction": [0, 0, -1],
                    "light_color": [0.5, 0.6, 0.7], "normals": "forward", "shadows": true,
                    "ambient": 0.05, "diffuse": 0.5, "specular": 0.75, "shininess": 7 },
@@ -178,6 +179,7 @@ TEST(Scene, EveryKeyTakesANonDefaultValue) {
   ASSERT_EQ(s.transfer_function.points().size(), 2u);
   expect_vec(s.transfer_function.points()[0].color, 1, 1, 1);  // the default colour
   EXPECT_DOUBLE_EQ(s.sampling_rate, 2.5);
+  EXPECT_EQ(s.time_step, 3);
   EXPECT_EQ(s.shading.light, LightKind::directional);
   expect_vec(s.shading.light_position, 1, 2, 3);
   expect_vec(s.shading.light_direction, 0, 0, -1);

@@ -52,7 +52,11 @@ inline void write_tet_store(const std::string& dir, int clusters) {
       values.push_back(x);
     }
     std::vector<uint32_t> corners;
-    for (const auto& t : kKuhn) corners.insert(corners.end(), t.begin(), t.end());
+    for (auto t : kKuhn) {  // positively oriented, as stores keep them
+      auto at = [&](uint32_t v) { return Vec3d(positions[3 * v], positions[3 * v + 1], positions[3 * v + 2]); };
+      if (dot(cross(at(t[1]) - at(t[0]), at(t[2]) - at(t[0])), at(t[3]) - at(t[0])) < 0) std::swap(t[2], t[3]);
+      corners.insert(corners.end(), t.begin(), t.end());
+    }
     writer.put_cluster(uint64_t(c), TetClusterPage::encode(positions, values, corners));
     TetCluster e;
     e.lo[0] = float(c), e.hi[0] = float(c + 1), e.hi[1] = 1, e.hi[2] = 1;
