@@ -8,7 +8,7 @@ packages=(
   liblmdb-dev lmdb-utils liblz4-dev
   libopenvdb-dev libboost-iostreams-dev
   libtbb-dev libgtest-dev libgmock-dev libbenchmark-dev
-  libcli11-dev nlohmann-json3-dev libpng-dev libfmt-dev libxxhash-dev zlib1g-dev libabsl-dev
+  libcli11-dev nlohmann-json3-dev libpng-dev libfmt-dev libxxhash-dev zlib1g-dev libexpat1-dev libabsl-dev
   gnuplot-nox
 )
 
