@@ -231,8 +231,9 @@ struct FlightCliOptions {
   std::string store, path = "scenes/flight-orbit.json", trace, stats;
   std::string l1 = "256MiB", l2 = "1GiB", l1_policy = "lru", l2_policy = "lru";
   uint32_t upload_budget = 0;
-  int frames = 0, loaders = 2;
+  int frames = 0, loaders = 2, time_step = 0;
   double lod = 1.0;
+  std::string values;
 };
 
 void run_flight(const FlightCliOptions& o) {
@@ -250,7 +251,35 @@ void run_flight(const FlightCliOptions& o) {
   f.lod_ratio = o.lod;
   f.frames = o.frames;
   std::string stats_json;
-  {
+  if (store.kind() == DataKind::tetrahedral) {
+    if (o.time_step < 0 || o.time_step >= store.manifest().time_steps)
+      throw Error(Errc::invalid_argument, fmt::format("time step {} of a mesh with {}", o.time_step, store.manifest().time_steps))
+          .with_field("--time-step");
+    f.time_step = o.time_step;
+    if (!o.values.empty()) std::tie(f.values_lo, f.values_hi) = parse_range(o.values, "--values");
+    PageCache cache(store, c);
+    std::cout << fmt::format("flight over {} ({} clusters, {} L1 slots, L2 {}), {} frames at {}x{}\n", o.store,
+                             store.clusters().size(), cache.pool_slots(RecordKind::tet_cluster),
+                             format_bytes(double(c.l2_bytes)), f.frames ? f.frames : path.frames, path.width, path.height);
+    uint64_t used = 0, hits = 0;
+    fly_clusters(cache, store.dataset().tets(), store.dataset().info().world, path, f, [&](const FlightFrame& r) {
+      used += r.bricks_used;
+      hits += r.hits;
+      if (r.frame % 10 == 0)
+        std::cout << fmt::format("  frame {:>4}: {:>6} clusters, {:>5.1f}% resident, {:>5} requests, {:>5} uploads, {}\n", r.frame,
+                                 r.bricks_used, r.bricks_used ? 100.0 * double(r.hits) / double(r.bricks_used) : 100.0,
+                                 r.requests, r.uploads, format_duration(r.seconds));
+    });
+    const CacheStats s = cache.stats(RecordKind::tet_cluster);
+    std::cout << fmt::format("clusters looked up {}, resident when asked {:.1f}%; L1 {} evictions; L2 peak {} of {}; "
+                             "read {} from the store\n",
+                             used, used ? 100.0 * double(hits) / double(used) : 100.0, s.l1.evictions,
+                             format_bytes(double(s.l2_peak_bytes)), format_bytes(double(c.l2_bytes)),
+                             format_bytes(double(s.l3_bytes_read)));
+    stats_json = s.to_json();
+  } else {
+    if (!o.values.empty() || o.time_step != 0)
+      throw Error(Errc::invalid_argument, "--values and --time-step apply to meshes").with_file(o.store);
     GridCache grid_cache(store, c);
     BrickCache& cache = grid_cache.bricks();
     std::cout << fmt::format("flight over {} ({} levels, {} L1 slots, L2 {}), {} frames at {}x{}\n", o.store,
@@ -298,6 +327,9 @@ void add_cache_commands(CLI::App& app) {
     cmd->add_option("--upload-budget", o->upload_budget, "Bricks uploaded into L1 per frame (0: unlimited)");
     cmd->add_option("--loaders", o->loaders, "Loader threads")->capture_default_str();
     cmd->add_option("--trace", o->trace, "Record every access to this trace file");
+    cmd->add_option("--values", o->values, "Meshes: only clusters whose values meet LO,HI (an isovalue: V,V)");
+    cmd->add_option("--time-step", o->time_step, "Meshes: the time step whose value ranges --values tests")
+        ->capture_default_str();
     cmd->add_option("--stats", o->stats, "Write the cache statistics as JSON");
     cmd->callback([o] { run_flight(*o); });
   }

@@ -49,6 +49,8 @@ struct ImportOptions {
   std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size;
   double constant_tolerance = 0;
   bool no_shuffle = false, no_map_growth = false, force = false, octree = false;
+  // meshes
+  MeshImportOptions mesh;
 };
 
 bool has_extension(const std::string& path, std::initializer_list<const char*> exts) {
@@ -115,6 +117,15 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
 }
 
 void run_import(const ImportOptions& o) {
+  if (is_mesh_source(o.source)) {
+    MeshImportOptions m = o.mesh;
+    m.source = o.source;
+    m.out = o.out;
+    m.params = o.params;
+    m.map_size = o.map_size;
+    m.force = o.force;
+    return run_mesh_import(m);
+  }
   auto source = open_source(o);
   BuildOptions b;
   b.brick_size = o.brick_size;
@@ -167,24 +178,6 @@ std::string sparkline(const Histogram& h, int width) {
     out += bars[std::clamp(int(std::ceil(f * 8)), 0, 8)];
   }
   return out;
-}
-
-void print_mesh_info(const std::string& path, const Store& store) {
-  const Manifest& m = store.manifest();
-  const MeshSummary& mesh = m.mesh;
-  std::cout << fmt::format("store {}: {}, tetrahedral mesh, format version {}\n", path,
-                           m.complete ? "complete" : "INCOMPLETE (build interrupted)", m.format_version);
-  std::cout << fmt::format("{} tetrahedra, {} vertices in {} clusters, pages of {}, {} time step{}\n", mesh.tets,
-                           mesh.vertices, mesh.clusters, format_bytes(double(mesh.page_bytes)), m.time_steps,
-                           m.time_steps == 1 ? "" : "s");
-  std::cout << fmt::format("bounds ({:g}, {:g}, {:g}) - ({:g}, {:g}, {:g}), values [{:g}, {:g}]\n", mesh.bounds.lo.x,
-                           mesh.bounds.lo.y, mesh.bounds.lo.z, mesh.bounds.hi.x, mesh.bounds.hi.y, mesh.bounds.hi.z,
-                           m.min_value, m.max_value);
-  if (!m.complete) return;
-  std::cout << fmt::format("cluster table {}, {} cluster records\n", format_bytes(double(store.clusters().size() * sizeof(TetCluster))),
-                           store.record_count());
-  std::cout << "source " << nlohmann::json::parse(m.source).dump() << "\n";
-  std::cout << "build  " << nlohmann::json::parse(m.build).dump() << "\n";
 }
 
 void run_info(const std::string& path, bool json) {
@@ -245,48 +238,6 @@ void run_info(const std::string& path, bool json) {
 
 /// A mesh store: every cluster page decodes (checksum, sizes), matches its table entry, and its
 /// vertices and values lie within the entry's bounds and range.
-int verify_mesh(const std::string& path, const Store& store) {
-  const std::vector<TetCluster>& clusters = store.clusters();
-  std::mutex bad_mutex;
-  std::vector<std::pair<uint64_t, std::string>> bad;
-  auto report = [&](uint64_t c, std::string why) {
-    std::lock_guard lock(bad_mutex);
-    bad.emplace_back(c, std::move(why));
-  };
-  if (store.record_count() != clusters.size())
-    report(clusters.size(), fmt::format("{} cluster records for {} clusters", store.record_count(), clusters.size()));
-  Progress progress("verify", clusters.size(), "clusters");
-  parallel_for<size_t>(0, clusters.size(), 16, [&](size_t c0, size_t c1) {
-    auto txn = store.begin_read();
-    std::vector<std::byte> page(size_t(store.manifest().mesh.page_bytes));
-    for (size_t c = c0; c < c1; ++c) {
-      try {
-        store.read_page(txn, {RecordKind::tet_cluster, c}, page);
-        const TetClusterPage p = TetClusterPage::view(page);
-        const TetCluster& e = clusters[c];
-        for (uint32_t v = 0; v < p.vertex_count; ++v) {
-          for (int a = 0; a < 3; ++a)
-            if (!(p.positions[3 * v + a] >= e.lo[a] && p.positions[3 * v + a] <= e.hi[a])) {
-              report(c, fmt::format("vertex {} lies outside the cluster's bounds", v));
-              break;
-            }
-          if (!(p.values[v] >= e.min && p.values[v] <= e.max)) report(c, fmt::format("value {} of vertex {} is outside [{}, {}]", p.values[v], v, e.min, e.max));
-        }
-        for (size_t i = 0; i < 4 * size_t(p.tet_count); ++i)
-          if (p.corners[i] >= p.vertex_count) report(c, fmt::format("tetrahedron {} names vertex {} of {}", i / 4, p.corners[i], p.vertex_count));
-      } catch (const Error& e) {
-        report(c, e.message());
-      }
-    }
-    progress.advance(c1 - c0);
-  });
-  progress.finish();
-  std::sort(bad.begin(), bad.end());
-  for (const auto& [c, why] : bad) std::cout << fmt::format("BAD cluster {}: {}\n", c, why);
-  std::cout << fmt::format("{}: {} clusters decoded, {} problems\n", path, clusters.size(), bad.size());
-  return bad.empty() ? 0 : 1;
-}
-
 /// A grid's octree volume: every page the table lists decodes (checksum, header, layout) and its
 /// root's range is the table's, and every stored page is in the table.
 size_t verify_octree(const std::string& path, const Store& store) {
@@ -403,11 +354,14 @@ int run_verify(const std::string& path) {
 // ----------------------------------------------------------------------------------- export
 
 void run_export(const std::string& path, int level, const std::string& box_text, const std::string& out,
-                const std::string& grid) {
+                const std::string& grid, const std::string& encoding) {
   Store store(path);
-  if (store.kind() != DataKind::structured)
-    throw Error(Errc::unsupported, fmt::format("export writes grids; this store holds a {} dataset", to_string(store.kind())))
-        .with_file(path);
+  if (store.kind() == DataKind::tetrahedral) {
+    if (level >= 0 || !box_text.empty() || !grid.empty())
+      throw Error(Errc::invalid_argument, "--level, --box and --grid apply to grids; a mesh exports whole").with_file(path);
+    return export_mesh(store, out, encoding.empty() ? "appended" : encoding);
+  }
+  if (!encoding.empty()) throw Error(Errc::invalid_argument, "--encoding applies to .vtu export of meshes").with_field("--encoding");
   std::optional<VoxelBox> box;
   if (!box_text.empty()) {
     const auto v = parse_int_list(box_text, 6, "--box");
@@ -436,7 +390,8 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     auto* cmd = app.add_subcommand("import", "Build a multiresolution brick store from a volume");
     cmd->add_option("SOURCE", o->source,
                     "A raw file (described by FILE.json or --dims/--type), a .nrrd/.nhdr file, a .vdb file, "
-                    "or field:NAME for a procedural field")
+                    "field:NAME for a procedural field; a mesh (.vtu .pvd .vtk .msh .node/.ele), or mesh:FIELD "
+                    "for a procedural tetrahedral mesh")
         ->required();
     cmd->add_option("-o,--out", o->out, "Store directory")->required();
     auto* raw = "Raw input";
@@ -450,6 +405,19 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("-s,--size", o->size, "Field: grid size N or NX,NY,NZ")->capture_default_str()->group(field);
     cmd->add_option("--set", o->params, "Field: parameter NAME=VALUE (repeatable)")->group(field);
     cmd->add_option("--grid", o->grid, "OpenVDB: grid name (default: the only grid)")->group("OpenVDB input");
+    auto* mesh = "Mesh input";
+    cmd->add_option("--array", o->mesh.array,
+                    "Mesh: the point array to import, or the name of a series NAME_0, NAME_1 ... (time steps); "
+                    "default the first")
+        ->group(mesh);
+    cmd->add_flag("--single-step", o->mesh.single_step, "Mesh: only the first array of a series")->group(mesh);
+    cmd->add_option("--cells", o->mesh.cells, "mesh:FIELD: cubes per axis (6 tets each)")->capture_default_str()->group(mesh);
+    cmd->add_option("--jitter", o->mesh.jitter, "mesh:FIELD: interior vertices moved by up to this many cells (0 to 0.2)")
+        ->capture_default_str()->group(mesh);
+    cmd->add_option("--replicate", o->mesh.replicate, "mesh:FIELD: copies per axis side by side (R^3 in all)")
+        ->capture_default_str()->group(mesh);
+    cmd->add_option("--steps", o->mesh.steps, "mesh:FIELD: time steps (the field moves along x)")->capture_default_str()->group(mesh);
+    cmd->add_option("--cluster-tets", o->mesh.cluster_tets, "Mesh: tets a cluster holds at most")->capture_default_str()->group(mesh);
     auto* build = "Build";
     cmd->add_option("--brick-size", o->brick_size, "Brick interior edge M: a power of two in [8, 128]")
         ->capture_default_str()->group(build);
@@ -489,17 +457,18 @@ void add_store_commands(CLI::App& app, int& exit_status) {
   }
   {
     struct ExportOptions {
-      std::string store, box, out, grid;
+      std::string store, box, out, grid, encoding;
       int level = -1;
     };
     auto o = std::make_shared<ExportOptions>();
-    auto* cmd = app.add_subcommand("export", "Write one level (or a box of it) as a raw file or an OpenVDB grid");
+    auto* cmd = app.add_subcommand("export", "Write one level (or a box of it) as a raw file or an OpenVDB grid; a mesh as .vtu");
     cmd->add_option("STORE", o->store, "Store directory")->required();
     cmd->add_option("-l,--level", o->level, "Level (default: the finest)");
     cmd->add_option("--box", o->box, "X0,Y0,Z0,X1,Y1,Z1: voxels [lo, hi) at that level (default: all)");
-    cmd->add_option("-o,--out", o->out, "FILE.raw (with FILE.raw.json) or FILE.vdb")->required();
+    cmd->add_option("-o,--out", o->out, "FILE.raw (with FILE.raw.json), FILE.vdb, or FILE.vtu for a mesh")->required();
     cmd->add_option("--grid", o->grid, "OpenVDB grid name (default: the source grid's name, or density)");
-    cmd->callback([o] { run_export(o->store, o->level, o->box, o->out, o->grid); });
+    cmd->add_option("--encoding", o->encoding, "Mesh to .vtu: ascii, binary, appended (raw, default), base64 or zlib");
+    cmd->callback([o] { run_export(o->store, o->level, o->box, o->out, o->grid, o->encoding); });
   }
 }
 

@@ -4,9 +4,14 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cstdint>
+#include <string>
+#include <vector>
+
 namespace brickyard {
 struct Manifest;
 struct OctreeBuildOptions;
+class Store;
 }
 
 namespace brickyard::cli {
@@ -26,6 +31,27 @@ void add_octree_commands(CLI::App& app);
 void run_build_octree(const std::string& dir, const OctreeBuildOptions& options);
 /// @brief What `info` prints of a grid's octree volume (nothing when it has none).
 void print_octree_info(const Manifest& m);
+/// @brief What `import` reads from a tetrahedral mesh (a file, or mesh:FIELD).
+struct MeshImportOptions {
+  std::string source, out;
+  std::string array;             ///< --array: the scalar (or series) to import; "" the first
+  bool single_step = false;      ///< --single-step: only the first of a series of arrays
+  int64_t cells = 32;            ///< mesh:FIELD
+  double jitter = 0;
+  int replicate = 1, steps = 1;
+  std::vector<std::string> params;
+  uint32_t cluster_tets = 8192;
+  std::string map_size;
+  bool force = false;
+};
+/// @brief Whether `import` reads this source as a mesh (mesh:FIELD, or a mesh file's extension).
+bool is_mesh_source(const std::string& source);
+void run_mesh_import(const MeshImportOptions& options);
+/// @brief info, verify and export of a tetrahedral store.
+void print_mesh_info(const std::string& path, const Store& store);
+int verify_mesh(const std::string& path, const Store& store);
+/// @brief Writes the store's mesh as a .vtu (`encoding`: ascii, binary, appended, base64, zlib).
+void export_mesh(const Store& store, const std::string& out, const std::string& encoding);
 /// @brief cachebench.
 void add_cache_commands(CLI::App& app);
 /// @brief render, bench.

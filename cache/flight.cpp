@@ -6,16 +6,46 @@
 #include "core/timing.h"
 
 namespace brickyard {
+namespace {
+
+/// The frame loop both flights share: the camera of each frame in world coordinates, a frame
+/// of the cache around `look_up(camera, report)`, which looks up the frame's pages, then the
+/// loader's turn and the frame's figures.
+template <typename LookUp>
+std::vector<FlightFrame> fly_frames(PageCache& cache, RecordKind kind, const Box3d& world, const CameraPath& path,
+                                    const FlightOptions& options, const std::function<void(const FlightFrame&)>& on_frame,
+                                    LookUp&& look_up) {
+  const int frames = options.frames > 0 ? options.frames : path.frames;
+  std::vector<FlightFrame> out;
+  uint64_t uploads_before = cache.stats(kind).uploads;
+  for (int f = 0; f < frames; ++f) {
+    Stopwatch watch;
+    CameraPath scaled = path;
+    scaled.frames = frames;
+    FlightFrame report;
+    report.frame = f;
+    cache.frame_begin();
+    look_up(scaled.at(f).in_box(world), report);
+    const FrameReport r = cache.frame_end();
+    report.requests = r.requests;
+    if (options.wait_for_loads) cache.wait_idle();
+    const uint64_t uploads = cache.stats(kind).uploads;
+    report.uploads = uploads - uploads_before;
+    uploads_before = uploads;
+    report.seconds = watch.seconds();
+    out.push_back(report);
+    if (on_frame) on_frame(report);
+  }
+  return out;
+}
+
+}  // namespace
 
 std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const FlightOptions& options,
                              const std::function<void(const FlightFrame&)>& on_frame) {
   const GridView& grid = cache.grid();
   const GridLayout& layout = grid.layout();
   const NodeTable& nodes = grid.nodes();
-  const Box3d world = grid.world_box();
-  const int frames = options.frames > 0 ? options.frames : path.frames;
-  std::vector<FlightFrame> out;
-
   struct Chosen {
     BrickKey key;
     double distance;
@@ -23,16 +53,8 @@ std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const Fl
   };
   std::vector<Chosen> chosen;
   std::vector<BrickKey> stack;
-  uint64_t uploads_before = cache.stats().uploads;
-  for (int f = 0; f < frames; ++f) {
-    Stopwatch watch;
-    CameraPath scaled = path;
-    scaled.frames = frames;
-    const Camera cam = scaled.at(f).in_box(world);
-    FlightFrame report;
-    report.frame = f;
-    cache.frame_begin();
-
+  return fly_frames(cache.pages(), RecordKind::brick, grid.world_box(), path, options, on_frame,
+                    [&](const Camera& cam, FlightFrame& report) {
     // Step 1: refine from the root: visible, non-constant nodes whose voxels look too large.
     chosen.clear();
     stack.assign(1, BrickKey{0, 0, 0, 0});
@@ -62,17 +84,31 @@ std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const Fl
       report.hits += h.ready();
     }
     report.bricks_used = chosen.size();
-    const FrameReport r = cache.frame_end();
-    report.requests = r.requests;
-    if (options.wait_for_loads) cache.wait_idle();
-    const uint64_t uploads = cache.stats().uploads;
-    report.uploads = uploads - uploads_before;
-    uploads_before = uploads;
-    report.seconds = watch.seconds();
-    out.push_back(report);
-    if (on_frame) on_frame(report);
-  }
-  return out;
+  });
+}
+
+std::vector<FlightFrame> fly_clusters(PageCache& cache, const TetView& tets, const Box3d& world, const CameraPath& path,
+                                      const FlightOptions& options, const std::function<void(const FlightFrame&)>& on_frame) {
+  const auto clusters = tets.clusters();
+  std::vector<std::pair<double, uint64_t>> chosen;
+  return fly_frames(cache, RecordKind::tet_cluster, world, path, options, on_frame, [&](const Camera& cam, FlightFrame& report) {
+    chosen.clear();
+    for (size_t c = 0; c < clusters.size(); ++c) {
+      ++report.nodes_visited;
+      const TetStepRange r = tets.range(c, options.time_step);
+      if (double(r.max) < options.values_lo || double(r.min) > options.values_hi) continue;
+      const Box3d box = clusters[c].bounds();
+      if (!cam.may_see(box, path.width, path.height)) continue;
+      chosen.emplace_back(distance(box, cam.eye), c);
+    }
+    std::sort(chosen.begin(), chosen.end());
+    for (size_t i = 0; i < chosen.size(); ++i) {
+      // Nearer clusters first: the priority falls with the order a ray caster meets them.
+      const PageHandle h = cache.lookup({RecordKind::tet_cluster, chosen[i].second}, float(chosen.size() - i));
+      report.hits += h.resident();
+    }
+    report.bricks_used = chosen.size();
+  });
 }
 
 }  // namespace brickyard

@@ -7,15 +7,22 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <vector>
 
 #include "cache/brick_cache.h"
+#include "cache/page_cache.h"
 #include "core/camera.h"
+#include "dataset/tet.h"
 
 namespace brickyard {
 
 struct FlightOptions {
   double lod_ratio = 1.0;       ///< refine while a voxel projects to more than this many pixels
+  /// Meshes: only clusters whose range (in `time_step`) meets [values_lo, values_hi], as a
+  /// scene asks for the clusters an isovalue or a transfer function can see.
+  double values_lo = -std::numeric_limits<double>::infinity(), values_hi = std::numeric_limits<double>::infinity();
+  int time_step = 0;
   bool wait_for_loads = true;   ///< let the loader finish between frames (deterministic traces)
   int frames = 0;               ///< 0: the path's own frame count
 };
@@ -35,5 +42,17 @@ struct FlightFrame {
 /// GridView::brick_voxel_pixels), as the level-of-detail back ends take them.
 std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const FlightOptions& options,
                              const std::function<void(const FlightFrame&)>& on_frame = {});
+
+}  // namespace brickyard
+
+namespace brickyard {
+
+/// @brief The same flight over a tetrahedral mesh's cluster table: each frame, the clusters
+/// whose bounds the view may see and whose value range meets the options' are looked up front
+/// to back (nearest first), through the page cache, as a tetrahedral back end asks for them.
+/// FlightFrame's bricks are clusters here; nodes_visited counts the cluster-table entries tested.
+std::vector<FlightFrame> fly_clusters(PageCache& cache, const TetView& tets, const Box3d& world, const CameraPath& path,
+                                      const FlightOptions& options,
+                                      const std::function<void(const FlightFrame&)>& on_frame = {});
 
 }  // namespace brickyard

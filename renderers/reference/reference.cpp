@@ -30,6 +30,7 @@
 #include "renderers/common/pixel.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
+#include "renderers/reference/tets.h"
 
 namespace brickyard {
 namespace {
@@ -377,14 +378,28 @@ BackendEntry reference_backend() {
   BackendEntry e;
   e.info.name = "reference";
   e.info.description = "double-precision ground truth at the finest level: exact trilinear isosurface crossings, "
-                       "fine-step emission-absorption, exact MIP; optionally the analytic field itself";
-  e.info.kinds = {DataKind::structured};
+                       "fine-step emission-absorption, exact MIP; optionally the analytic field itself; on "
+                       "tetrahedral meshes exact linear crossings and per-tet segment integrals";
+  e.info.kinds = {DataKind::structured, DataKind::tetrahedral};
   e.info.modes = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
   e.info.shadows = true;
   e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
   e.info.params = reference_params().declarations();
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
     const ReferenceParams rp = reference_params().bind(p);
+    if (ctx.kind() == DataKind::tetrahedral) {
+      if (rp.analytic)
+        throw Error(Errc::unsupported, "analytic = 1 renders grids made from a procedural field; a mesh's reference is "
+                                       "its own linear interpolant")
+            .with_file(ctx.dataset().name)
+            .with_field("backend.params.analytic");
+      if (ctx.scene().shading.normals != NormalMethod::analytic)
+        throw Error(Errc::unsupported, "on a tetrahedral mesh the normal is the tet's gradient: shading.normals "
+                                       "must be analytic")
+            .with_file(ctx.scene().file)
+            .with_field("shading.normals");
+      return make_tet_reference(ctx);
+    }
     std::unique_ptr<AnalyticTruth> truth;
     if (rp.analytic) {
       truth = AnalyticTruth::from_source(ctx.dataset().source, ctx.grid().shape().type);

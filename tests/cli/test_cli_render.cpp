@@ -183,7 +183,7 @@ TEST_F(CliRender, UnknownBackEndOrParameterIsAUsageErrorListingTheKnownOnes) {
 TEST_F(CliRender, ListBackendsNamesEveryBackEndWithItsParameters) {
   const auto r = brickyard("render --list-backends");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_THAT(r.output, HasSubstr("reference  (iso,dvr,mip; structured)"));
+  EXPECT_THAT(r.output, HasSubstr("reference  (iso,dvr,mip; structured,tetrahedral)"));
   EXPECT_THAT(r.output, HasSubstr("raymarch  (iso,dvr,mip; structured)"));
   EXPECT_THAT(r.output, HasSubstr("bench sweeps step = "));
 }

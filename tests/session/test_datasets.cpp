@@ -109,7 +109,7 @@ TEST_F(Datasets, ATetrahedralDatasetReachesItsBackEndThroughThePageCache) {
 }
 
 TEST_F(Datasets, GridBackEndsAreRefusedOnAMeshByName) {
-  for (const char* backend : {"raymarch", "reference", "gobbetti", "gigavoxels"}) {
+  for (const char* backend : {"raymarch", "gobbetti", "gigavoxels", "octree_cgt"}) {
     try {
       RenderSession session(scene("row.store", backend, R"("mode": "iso", "isosurfaces": [{"value": 2}])"));
       FAIL() << backend;
