@@ -9,7 +9,8 @@
   X(raymarch)                 \
   X(gobbetti)                 \
   X(gigavoxels)                \
-  X(octree_cgt)
+  X(octree_cgt)                \
+  X(tet_bvh)
 
 namespace brickyard {
 

@@ -1,0 +1,189 @@
+#include "renderers/tet_bvh/bvh.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include "core/math.h"
+
+namespace brickyard::tet_bvh {
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+struct Builder {
+  const std::vector<Bounds4>& items;
+  BuildMethod method;
+  uint32_t leaf_size;
+  BoxBvh out;
+  std::vector<float> centre;  // 3 per item
+
+  Bounds4 bounds_of(size_t begin, size_t end) const {
+    Bounds4 b;
+    for (int a = 0; a < 4; ++a) b.lo[a] = kInf, b.hi[a] = -kInf;
+    for (size_t i = begin; i < end; ++i) {
+      const Bounds4& t = items[out.order[i]];
+      for (int a = 0; a < 4; ++a) b.lo[a] = std::min(b.lo[a], t.lo[a]), b.hi[a] = std::max(b.hi[a], t.hi[a]);
+    }
+    return b;
+  }
+  float c(uint32_t item, int axis) const { return centre[size_t(item) * 3 + size_t(axis)]; }
+
+  /// Where to split [begin, end) and along which axis; mid == begin or end means no split.
+  size_t split(size_t begin, size_t end, const Bounds4& b, int& axis) {
+    float clo[3] = {kInf, kInf, kInf}, chi[3] = {-kInf, -kInf, -kInf};
+    for (size_t i = begin; i < end; ++i)
+      for (int a = 0; a < 3; ++a) clo[a] = std::min(clo[a], c(out.order[i], a)), chi[a] = std::max(chi[a], c(out.order[i], a));
+    if (method == BuildMethod::sah) return sah_split(begin, end, clo, chi, axis);
+    // BIH: the middle of the node's box along its longest axis; centres decide the side.
+    axis = 0;
+    for (int a = 1; a < 3; ++a)
+      if (b.hi[a] - b.lo[a] > b.hi[axis] - b.lo[axis]) axis = a;
+    const float plane = 0.5f * (b.lo[axis] + b.hi[axis]);
+    auto mid = std::partition(out.order.begin() + long(begin), out.order.begin() + long(end),
+                              [&](uint32_t i) { return c(i, axis) < plane; });
+    return size_t(mid - out.order.begin());
+  }
+
+  size_t sah_split(size_t begin, size_t end, const float* clo, const float* chi, int& best_axis) {
+    constexpr int kBins = 16;
+    double best = std::numeric_limits<double>::infinity();
+    int best_bin = -1;
+    best_axis = -1;
+    auto area = [](const Bounds4& b) {
+      const double x = std::max(0.0f, b.hi[0] - b.lo[0]), y = std::max(0.0f, b.hi[1] - b.lo[1]),
+                   z = std::max(0.0f, b.hi[2] - b.lo[2]);
+      return x * y + y * z + z * x;
+    };
+    for (int a = 0; a < 3; ++a) {
+      const float extent = chi[a] - clo[a];
+      if (!(extent > 0)) continue;
+      std::array<Bounds4, kBins> bins;
+      std::array<uint32_t, kBins> counts{};
+      for (auto& bin : bins)
+        for (int k = 0; k < 4; ++k) bin.lo[k] = kInf, bin.hi[k] = -kInf;
+      for (size_t i = begin; i < end; ++i) {
+        const uint32_t it = out.order[i];
+        const int bin = std::min(kBins - 1, int((c(it, a) - clo[a]) / extent * kBins));
+        ++counts[size_t(bin)];
+        for (int k = 0; k < 4; ++k)
+          bins[size_t(bin)].lo[k] = std::min(bins[size_t(bin)].lo[k], items[it].lo[k]),
+          bins[size_t(bin)].hi[k] = std::max(bins[size_t(bin)].hi[k], items[it].hi[k]);
+      }
+      // Sweep: cost of splitting after bin s = left count * left area + right count * right area.
+      std::array<double, kBins> left_cost{};
+      Bounds4 acc = bins[0];
+      uint32_t n = 0;
+      for (int s = 0; s < kBins - 1; ++s) {
+        if (s > 0)
+          for (int k = 0; k < 4; ++k) acc.lo[k] = std::min(acc.lo[k], bins[size_t(s)].lo[k]), acc.hi[k] = std::max(acc.hi[k], bins[size_t(s)].hi[k]);
+        n += counts[size_t(s)];
+        left_cost[size_t(s)] = n ? double(n) * area(acc) : 0;
+      }
+      acc = bins[kBins - 1];
+      n = 0;
+      for (int s = kBins - 1; s > 0; --s) {
+        if (s < kBins - 1)
+          for (int k = 0; k < 4; ++k) acc.lo[k] = std::min(acc.lo[k], bins[size_t(s)].lo[k]), acc.hi[k] = std::max(acc.hi[k], bins[size_t(s)].hi[k]);
+        n += counts[size_t(s)];
+        const double cost = left_cost[size_t(s - 1)] + (n ? double(n) * area(acc) : 0);
+        if (n > 0 && n < end - begin && cost < best) best = cost, best_bin = s, best_axis = a;
+      }
+    }
+    if (best_axis < 0) {
+      best_axis = 0;
+      return begin;  // every centre in one place: the caller splits by count
+    }
+    const float extent = chi[best_axis] - clo[best_axis];
+    auto mid = std::partition(out.order.begin() + long(begin), out.order.begin() + long(end), [&](uint32_t i) {
+      return std::min(kBins - 1, int((c(i, best_axis) - clo[best_axis]) / extent * kBins)) < best_bin;
+    });
+    return size_t(mid - out.order.begin());
+  }
+
+  uint32_t node(size_t begin, size_t end) {
+    const uint32_t index = uint32_t(out.nodes.size());
+    out.nodes.emplace_back();
+    const Bounds4 b = bounds_of(begin, end);
+    BvhNode n;
+    std::copy(b.lo, b.lo + 4, n.lo);
+    std::copy(b.hi, b.hi + 4, n.hi);
+    if (end - begin <= leaf_size) {
+      n.index = uint32_t(begin), n.count = uint16_t(end - begin);
+      out.nodes[index] = n;
+      return index;
+    }
+    int axis = 0;
+    size_t mid = split(begin, end, b, axis);
+    if (mid == begin || mid == end) {  // everything on one side: split by count along the axis
+      mid = begin + (end - begin) / 2;
+      std::nth_element(out.order.begin() + long(begin), out.order.begin() + long(mid), out.order.begin() + long(end),
+                       [&](uint32_t x, uint32_t y) { return c(x, axis) < c(y, axis) || (c(x, axis) == c(y, axis) && x < y); });
+    }
+    node(begin, mid);
+    n.index = node(mid, end);
+    n.axis = uint16_t(axis);
+    out.nodes[index] = n;
+    return index;
+  }
+};
+
+}  // namespace
+
+BoxBvh build_bvh(const std::vector<Bounds4>& items, BuildMethod method, uint32_t leaf_size) {
+  Builder b{items, method, std::max(1u, leaf_size), {}, {}};
+  b.out.order.resize(items.size());
+  b.centre.resize(items.size() * 3);
+  for (size_t i = 0; i < items.size(); ++i) {
+    b.out.order[i] = uint32_t(i);
+    for (int a = 0; a < 3; ++a) b.centre[i * 3 + size_t(a)] = 0.5f * (items[i].lo[a] + items[i].hi[a]);
+  }
+  if (!items.empty()) b.node(0, items.size());
+  return std::move(b.out);
+}
+
+ClusterBvh ClusterBvh::build(const TetClusterPage& page, uint32_t step, BuildMethod method, uint32_t leaf_size) {
+  const float* pos = page.positions_at(step);
+  const float* val = page.values_at(step);
+  std::vector<Bounds4> items;
+  std::vector<uint32_t> tet_of;  // item -> tet
+  items.reserve(page.tet_count);
+  ClusterBvh out;
+  for (uint32_t t = 0; t < page.tet_count; ++t) {
+    const uint32_t* q = page.corners + 4 * size_t(t);
+    Bounds4 b;
+    for (int a = 0; a < 4; ++a) b.lo[a] = kInf, b.hi[a] = -kInf;
+    Vec3d p[4];
+    bool finite = true;
+    for (int k = 0; k < 4; ++k) {
+      if (q[k] >= page.vertex_count) {
+        finite = false;
+        break;
+      }
+      const float* v = pos + 3 * size_t(q[k]);
+      p[k] = Vec3d(v[0], v[1], v[2]);
+      for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], v[a]), b.hi[a] = std::max(b.hi[a], v[a]);
+      b.lo[3] = std::min(b.lo[3], val[q[k]]), b.hi[3] = std::max(b.hi[3], val[q[k]]);
+      finite = finite && std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]) && std::isfinite(val[q[k]]);
+    }
+    // Stores keep only valid tets; a page from anywhere else must not bring a degenerate one in.
+    if (!finite || !(dot(cross(p[1] - p[0], p[2] - p[0]), p[3] - p[0]) > 0)) {
+      ++out.skipped;
+      continue;
+    }
+    items.push_back(b);
+    tet_of.push_back(t);
+  }
+  out.bvh = build_bvh(items, method, leaf_size);
+  out.tet_range.resize(items.size() * 2);
+  for (size_t s = 0; s < out.bvh.order.size(); ++s) {
+    const uint32_t item = out.bvh.order[s];
+    out.tet_range[2 * s] = items[item].lo[3];
+    out.tet_range[2 * s + 1] = items[item].hi[3];
+    out.bvh.order[s] = tet_of[item];
+  }
+  return out;
+}
+
+}  // namespace brickyard::tet_bvh

@@ -1,0 +1,60 @@
+#pragma once
+/// @file bvh.h
+/// @brief tet_bvh's implicit 4D min/max BVH (Wald, Friedrich, Knoll and Hansen): every node
+/// bounds its tets in {x, y, z, value}, so that one test culls a subtree in space (the ray's
+/// box test) or in value (the implicit test: no isovalue between its min and max). Built per
+/// cluster when the cluster first arrives, for the scene's time step, and once over the
+/// cluster table.
+///
+/// Node layout: lo and hi as 4-float vectors (x, y, z, value), then the right child (inner)
+/// or the first item (leaf), the item count (0 for inner nodes) and the split axis, 40 bytes.
+/// The left child of an inner node is the next node.
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "dataset/tet.h"
+
+namespace brickyard::tet_bvh {
+
+struct alignas(8) BvhNode {
+  float lo[4], hi[4];  ///< x, y, z, value
+  uint32_t index = 0;  ///< inner: right child; leaf: first item in BoxBvh::order
+  uint16_t count = 0;  ///< items of a leaf; 0 for an inner node
+  uint16_t axis = 0;   ///< inner: the split axis (the near child first along it)
+  bool leaf() const { return count != 0; }
+};
+static_assert(sizeof(BvhNode) == 40);
+
+enum class BuildMethod : uint8_t {
+  bih,  ///< spatial median of the node's box along its longest axis (BIH-style, fast)
+  sah,  ///< binned surface-area heuristic (slower to build, fewer tests)
+};
+
+/// @brief An item's {x, y, z, value} bounds.
+struct Bounds4 {
+  float lo[4], hi[4];
+};
+
+/// @brief A BVH over boxes: nodes and the items in leaf order.
+struct BoxBvh {
+  std::vector<BvhNode> nodes;
+  std::vector<uint32_t> order;
+  size_t bytes() const { return nodes.size() * sizeof(BvhNode) + order.size() * sizeof(uint32_t); }
+};
+/// @brief Builds over `items`; leaves hold at most `leaf_size` items.
+BoxBvh build_bvh(const std::vector<Bounds4>& items, BuildMethod method, uint32_t leaf_size);
+
+/// @brief A cluster's BVH for one time step, with each leaf slot's tet and its value range
+/// (the leaf tests a tet's own range before it extracts the tet's isopolygon).
+struct ClusterBvh {
+  BoxBvh bvh;
+  std::vector<float> tet_range;  ///< min, max per leaf slot
+  uint32_t skipped = 0;          ///< tets left out: not positively oriented, or not finite
+  size_t bytes() const { return bvh.bytes() + tet_range.size() * sizeof(float); }
+
+  static ClusterBvh build(const TetClusterPage& page, uint32_t step, BuildMethod method, uint32_t leaf_size);
+};
+
+}  // namespace brickyard::tet_bvh
