@@ -34,7 +34,7 @@
 
 #include "renderers/common/pixel.h"
 #include "renderers/common/shading.h"
-#include "renderers/reference/tet_geometry.h"
+#include "renderers/common/tet_geometry.h"
 
 namespace brickyard {
 namespace {

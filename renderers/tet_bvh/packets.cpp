@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "core/error.h"
+#include "renderers/common/tet_geometry.h"
 #include "renderers/tet_bvh/renderer.h"
 
 namespace brickyard::tet_bvh {
@@ -49,10 +50,6 @@ struct CaseTable {
 };
 const CaseTable kCases;
 
-bool position_less(const Vec3d& u, const Vec3d& v) {
-  return u.x < v.x || (u.x == v.x && (u.y < v.y || (u.y == v.y && u.z < v.z)));
-}
-
 /// A tet's isopolygon for one isovalue, ready for a packet with origin o: its plane
 /// (gradient g, g . x = c) and its edges' planes through o, oriented inwards.
 struct Isopolygon {
@@ -65,18 +62,11 @@ struct Isopolygon {
 /// Extracts the isopolygon of tet t for `iso`; false when it has none (or is seen edge-on
 /// from o).
 bool extract(const TetClusterPage& page, uint32_t t, uint32_t step, double iso, const Vec3d& o, Isopolygon& poly) {
-  const uint32_t* q = page.corners + 4 * size_t(t);
-  const float* pos = page.positions_at(step);
-  const float* val = page.values_at(step);
-  Vec3d p[4];
-  double f[4];
+  const TetGeometry tet(page, t, step);
+  const Vec3d* p = tet.p;
+  const double* f = tet.f;
   int mask = 0;
-  for (int k = 0; k < 4; ++k) {
-    const float* v = pos + 3 * size_t(q[k]);
-    p[k] = Vec3d(v[0], v[1], v[2]);
-    f[k] = val[q[k]];
-    mask |= int(f[k] > iso) << k;
-  }
+  for (int k = 0; k < 4; ++k) mask |= int(f[k] > iso) << k;
   const int n = kCases.count[mask];
   if (n == 0) return false;
   // The vertices on their edges, each from its edge's ends in canonical order: the tets that
@@ -88,11 +78,7 @@ bool extract(const TetClusterPage& page, uint32_t t, uint32_t step, double iso, 
     const double w = (iso - f[a]) / (f[b] - f[a]);
     v[k] = p[a] + (p[b] - p[a]) * w;
   }
-  // The linear field's gradient (Cramer's rule on the tet's edges).
-  const Vec3d e1 = p[1] - p[0], e2 = p[2] - p[0], e3 = p[3] - p[0];
-  const double det = dot(e1, cross(e2, e3));
-  const Vec3d df(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
-  poly.gradient = (cross(e2, e3) * df.x + cross(e3, e1) * df.y + cross(e1, e2) * df.z) / det;
+  poly.gradient = tet.gradient();
   poly.plane_offset = dot(poly.gradient, v[0] - o);
   Vec3d centre(0.0);
   for (int k = 0; k < n; ++k) centre += v[k];
@@ -117,9 +103,9 @@ struct Local {
 /// Where ray l enters a box within its span (infinity when it misses it).
 double ray_box_entry(const Packet& p, int l, const BvhNode& n) {
   double a = p.tmin[l], b = p.limit(l);
-  const double d[3] = {p.dx[l], p.dy[l], p.dz[l]};
+  const double inverse[3] = {p.ix[l], p.iy[l], p.iz[l]};
   for (int ax = 0; ax < 3; ++ax) {
-    const double inv = 1.0 / d[ax];
+    const double inv = inverse[ax];
     double t0 = (double(n.lo[ax]) - p.origin[ax]) * inv, t1 = (double(n.hi[ax]) - p.origin[ax]) * inv;
     if (t0 > t1) std::swap(t0, t1);
     if (std::isnan(t0)) t0 = -kInf;  // the ray lies in the slab's plane: 0 * inf
@@ -160,6 +146,7 @@ void Packet::prepare() {
   for (int a = 0; a < 3; ++a) dlo[a] = kInf, dhi[a] = -kInf;
   t_lo = kInf, t_hi = -kInf;
   for (int l = 0; l < lanes; ++l) {
+    ix[l] = 1.0 / dx[l], iy[l] = 1.0 / dy[l], iz[l] = 1.0 / dz[l];
     if (!active[l]) continue;
     const double d[3] = {dx[l], dy[l], dz[l]};
     for (int a = 0; a < 3; ++a) dlo[a] = std::min(dlo[a], d[a]), dhi[a] = std::max(dhi[a], d[a]);
@@ -274,9 +261,8 @@ void walk(const BoxBvh& bvh, Packet& p, const std::vector<double>& iso, int firs
 
 }  // namespace
 
-void TetBvhRenderer::trace_cluster(Packet& p, uint32_t cluster, const TetClusterPage& page, const ClusterBvh& bvh, int first,
+void TetBvhRenderer::trace_cluster(Packet& p, const TetClusterPage& page, const ClusterBvh& bvh, int first,
                                    RayCounters& counters) const {
-  (void)cluster;
   Local c;
   walk(bvh.bvh, p, iso_, first, c, [&](const BvhNode& n, int f) {
     ++counters.cells;
@@ -320,7 +306,7 @@ uint64_t TetBvhRenderer::trace(Packet& p, RayCounters& counters) const {
       ++counters.hits;
       const TetClusterPage page = TetClusterPage::view({h.bytes(), tets_.page_bytes()});
       const auto bvh = cluster_bvh(cluster, page);
-      trace_cluster(p, cluster, page, *bvh, first, counters);
+      trace_cluster(p, page, *bvh, first, counters);
     }
   });
   counters.nodes += c.ray_box;

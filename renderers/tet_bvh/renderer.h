@@ -69,6 +69,7 @@ struct Packet {
   int lanes = 0;
   Vec3d origin;              ///< shared origin
   double dx[kMaxLanes], dy[kMaxLanes], dz[kMaxLanes];
+  double ix[kMaxLanes], iy[kMaxLanes], iz[kMaxLanes];  ///< 1 / direction, set by prepare()
   double tmin[kMaxLanes], tmax[kMaxLanes];
   double hit_t[kMaxLanes];
   double t_miss[kMaxLanes];  ///< where the ray first entered a cluster that was not resident
@@ -82,7 +83,7 @@ struct Packet {
   double t_lo = 0, t_hi = 0;  ///< bounds of tmin and of min(tmax, hit_t) over the active lanes
 
   Vec3d dir(int l) const { return {dx[l], dy[l], dz[l]}; }
-  void prepare();  ///< computes the frustum from the active lanes
+  void prepare();  ///< computes the inverse directions, and the frustum from the active lanes
   double limit(int l) const { return std::min(tmax[l], hit_t[l]); }
 };
 
@@ -111,16 +112,14 @@ class TetBvhRenderer final : public Renderer {
   };
   std::shared_ptr<const ClusterBvh> cluster_bvh(uint64_t cluster, const TetClusterPage& page) const;
   void note_missing(uint32_t cluster, float priority, uint32_t tile) const;
-  void trace_cluster(Packet& p, uint32_t cluster, const TetClusterPage& page, const ClusterBvh& bvh, int first,
-                     RayCounters& counters) const;
+  void trace_cluster(Packet& p, const TetClusterPage& page, const ClusterBvh& bvh, int first, RayCounters& counters) const;
   void leaf(Packet& p, const TetClusterPage& page, const ClusterBvh& bvh, const BvhNode& node, int first) const;
   /// Traces a packet's layers, shades and writes the pixels it finished (shade.cpp); false
   /// when some lane met a missing cluster.
   bool shade_packet(const FrameSetup& setup, Packet& p, const int* px, const int* py, FrameBuffers& out,
                     RayCounters& counters) const;
   /// Whether lane l's hit is in shadow (`certain`: no missing cluster could hide an occluder).
-  void shadows(const FrameSetup& setup, const Packet& p, const bool* lit, bool* shadowed, bool* certain,
-               RayCounters& counters) const;
+  void shadows(const Packet& p, const bool* lit, bool* shadowed, bool* certain, RayCounters& counters) const;
   bool render_packet(const FrameSetup& setup, const ImageRays& rays, int x0, int y0, int x1, int y1, FrameBuffers& out,
                      RayCounters& counters) const;
 

@@ -12,9 +12,7 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 }
 
-void TetBvhRenderer::shadows(const FrameSetup& setup, const Packet& p, const bool* lit, bool* shadowed, bool* certain,
-                             RayCounters& counters) const {
-  (void)setup;
+void TetBvhRenderer::shadows(const Packet& p, const bool* lit, bool* shadowed, bool* certain, RayCounters& counters) const {
   const double offset = 1e-6 * geo_.voxel_size;  // leave the surface the ray starts on
   const LightKind light = scene_.shading.light;
   for (int l = 0; l < p.lanes; ++l) shadowed[l] = false, certain[l] = true;
@@ -111,7 +109,7 @@ bool TetBvhRenderer::shade_packet(const FrameSetup& setup, Packet& p, const int*
       }
       lit[l] = p.hit_surface[l] >= 0 && scene_.shading.lit() && gradients;
     }
-    shadows(setup, p, lit, shadowed, certain, counters);
+    shadows(p, lit, shadowed, certain, counters);
     for (int l = 0; l < p.lanes; ++l) {
       if (!p.active[l]) continue;
       if (p.hit_surface[l] < 0) {

@@ -6,11 +6,11 @@
 #include <limits>
 
 #include <fmt/format.h>
+#include <tbb/task_arena.h>
 
 #include "core/error.h"
 #include "core/timing.h"
 #include "renderers/common/render.h"
-#include <tbb/task_arena.h>
 #include "renderers/tet_bvh/renderer.h"
 
 namespace brickyard {

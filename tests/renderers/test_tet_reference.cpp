@@ -12,7 +12,7 @@
 #include "fields/random.h"
 #include "preprocess/mesh_data.h"
 #include "preprocess/tet_builder.h"
-#include "renderers/reference/tet_geometry.h"
+#include "renderers/common/tet_geometry.h"
 #include "renderers/common/scene.h"
 #include "session/render_session.h"
 #include "storage/store.h"

@@ -1,8 +1,9 @@
 #pragma once
 /// @file tet_geometry.h
-/// @brief The reference's ray-tet intersection, in double: the closed interval a ray spends
-/// in a tet, computed so that two tets sharing a face agree on it to the last bit (each face
-/// plane from its three vertices in one canonical order), and the tet's linear field.
+/// @brief A tet of a cluster page in double, as the tetrahedral back ends and the reference
+/// see it: its linear field and gradient, and the closed interval a ray spends in it, computed
+/// so that two tets sharing a face agree on it to the last bit (each face plane from its three
+/// vertices in one canonical order, position_less()).
 
 #include <algorithm>
 #include <cstdint>
@@ -12,7 +13,13 @@
 
 namespace brickyard {
 
-/// A tet as the reference intersects it, in double.
+/// @brief The canonical order of points shared by neighbouring tets (lexicographic in x, y,
+/// z): whatever two tets compute from the same points taken in this order agrees to the bit.
+inline bool position_less(const Vec3d& u, const Vec3d& v) {
+  return u.x < v.x || (u.x == v.x && (u.y < v.y || (u.y == v.y && u.z < v.z)));
+}
+
+/// @brief A tet in double: its corners and their values.
 struct TetGeometry {
   Vec3d p[4];
   double f[4];
@@ -51,12 +58,9 @@ struct TetGeometry {
     for (int i = 0; i < 4; ++i) {
       Vec3d q[3] = {p[kFaces[i][0]], p[kFaces[i][1]], p[kFaces[i][2]]};
       // Canonical order: the neighbour across this face computes the identical plane.
-      auto less = [](const Vec3d& u, const Vec3d& v) {
-        return u.x < v.x || (u.x == v.x && (u.y < v.y || (u.y == v.y && u.z < v.z)));
-      };
-      if (less(q[1], q[0])) std::swap(q[0], q[1]);
-      if (less(q[2], q[1])) std::swap(q[1], q[2]);
-      if (less(q[1], q[0])) std::swap(q[0], q[1]);
+      if (position_less(q[1], q[0])) std::swap(q[0], q[1]);
+      if (position_less(q[2], q[1])) std::swap(q[1], q[2]);
+      if (position_less(q[1], q[0])) std::swap(q[0], q[1]);
       const Vec3d n = cross(q[1] - q[0], q[2] - q[0]);
       const double outward = dot(n, p[i] - q[0]) > 0 ? -1.0 : 1.0;
       const double num = dot(n, q[0] - o), den = dot(n, d);
