@@ -44,6 +44,7 @@ void run_mesh_import(const MeshImportOptions& o) {
     spec.jitter = o.jitter;
     spec.replicate = o.replicate;
     spec.steps = o.steps;
+    spec.move = o.move;
     source = make_procedural_mesh(spec, b.cluster_tets);
   } else {
     if (!o.params.empty()) throw Error(Errc::invalid_argument, "--set applies to field: and mesh: sources only").with_field("--set");

@@ -417,6 +417,10 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("--replicate", o->mesh.replicate, "mesh:FIELD: copies per axis side by side (R^3 in all)")
         ->capture_default_str()->group(mesh);
     cmd->add_option("--steps", o->mesh.steps, "mesh:FIELD: time steps (the field moves along x)")->capture_default_str()->group(mesh);
+    cmd->add_option("--move", o->mesh.move,
+                    "mesh:FIELD with --steps: the vertices move too, a shear of this fraction of the domain per step")
+        ->capture_default_str()
+        ->group(mesh);
     cmd->add_option("--cluster-tets", o->mesh.cluster_tets, "Mesh: tets a cluster holds at most")->capture_default_str()->group(mesh);
     auto* build = "Build";
     cmd->add_option("--brick-size", o->brick_size, "Brick interior edge M: a power of two in [8, 128]")

@@ -39,6 +39,7 @@ struct MeshImportOptions {
   int64_t cells = 32;            ///< mesh:FIELD
   double jitter = 0;
   int replicate = 1, steps = 1;
+  double move = 0;               ///< mesh:FIELD: moving vertices (see ProceduralMeshSpec)
   std::vector<std::string> params;
   uint32_t cluster_tets = 8192;
   std::string map_size;

@@ -146,6 +146,9 @@ class ProceduralMesh final : public TetClusterSource {
           .with_field("--replicate");
     if (spec.steps < 1 || spec.steps > 1024)
       throw Error(Errc::invalid_argument, fmt::format("{} time steps (need 1 to 1024)", spec.steps)).with_field("--steps");
+    if (!(std::abs(spec.move) <= 1))
+      throw Error(Errc::invalid_argument, fmt::format("move {} (need -1 to 1: a fraction of the domain per step)", spec.move))
+          .with_field("--move");
     block_ = std::clamp<int64_t>(int64_t(std::cbrt(double(std::max<uint32_t>(6, cluster_tets)) / 6.0)), 1, spec.cells);
     blocks_ = (spec.cells + block_ - 1) / block_;
     domain_ = field_->domain();
@@ -163,10 +166,12 @@ class ProceduralMesh final : public TetClusterSource {
     for (const FieldParam& p : field_->params()) params[p.name] = p.value;
     nlohmann::json j = {{"kind", "procedural_mesh"}, {"field", spec_.field}, {"params", params},
                         {"cells", spec_.cells}, {"jitter", spec_.jitter}, {"replicate", spec_.replicate},
-                        {"steps", spec_.steps}, {"step_shift", spec_.step_shift}, {"seed", spec_.seed}};
+                        {"steps", spec_.steps}, {"step_shift", spec_.step_shift}, {"move", spec_.move},
+                        {"seed", spec_.seed}};
     return j.dump();
   }
   int time_steps() const override { return spec_.steps; }
+  bool moving() const override { return spec_.move != 0 && spec_.steps > 1; }
   std::string array_name() const override { return spec_.field; }
   std::vector<std::string> step_names() const override {
     std::vector<std::string> out;
@@ -189,7 +194,8 @@ class ProceduralMesh final : public TetClusterSource {
     const int64_t nx = std::min(block_, spec_.cells - x0), ny = std::min(block_, spec_.cells - y0), nz = std::min(block_, spec_.cells - z0);
     const int64_t vx = nx + 1, vy = ny + 1, vz = nz + 1;
     const size_t v = size_t(vx * vy * vz);
-    out.positions.resize(v * 3);
+    const size_t sets = moving() ? size_t(spec_.steps) : 1;
+    out.positions.resize(sets * v * 3);
     out.values.resize(v * size_t(spec_.steps));
     for (int64_t k = 0; k < vz; ++k)
       for (int64_t j = 0; j < vy; ++j)
@@ -197,6 +203,10 @@ class ProceduralMesh final : public TetClusterSource {
           const size_t l = size_t((k * vy + j) * vx + ii);
           const Vec3d p = vertex(x0 + ii, y0 + j, z0 + k);
           for (int a = 0; a < 3; ++a) out.positions[l * 3 + size_t(a)] = float(p[a] + offset[a]);
+          for (size_t set = 1; set < sets; ++set) {
+            const Vec3d moved = moved_vertex(p, int(set));
+            for (int a = 0; a < 3; ++a) out.positions[(set * v + l) * 3 + size_t(a)] = float(moved[a] + offset[a]);
+          }
           for (int s = 0; s < spec_.steps; ++s) {
             // The value at the stored (float) position, so that the mesh's linear field
             // agrees with the field at its vertices to the last bit the store keeps.
@@ -221,10 +231,20 @@ class ProceduralMesh final : public TetClusterSource {
             out.corners.insert(out.corners.end(), q, q + 4);
           }
         }
+    check_moved_tets(out, v, sets, i);
   }
 
  private:
   uint64_t replicas() const { return uint64_t(spec_.replicate) * uint64_t(spec_.replicate) * uint64_t(spec_.replicate); }
+
+  /// Where vertex p is at `step` (a shear: x moves with y, y with z; the map's Jacobian is
+  /// unit upper triangular, so it keeps volume, and a straight-edged tet much smaller than the
+  /// wave keeps its orientation).
+  Vec3d moved_vertex(const Vec3d& p, int step) const {
+    const Vec3d e = domain_.extent(), u = (p - domain_.lo) / e;
+    const double amount = spec_.move * double(step), two_pi = 2 * 3.14159265358979323846;
+    return {p.x + amount * e.x * std::sin(two_pi * u.y), p.y + amount * e.y * std::sin(two_pi * u.z), p.z};
+  }
 
   /// Grid vertex (i, j, k) with its jitter: a hash of its index, so every cluster that shares
   /// it puts it at the same place; vertices on the domain's faces stay on them.
@@ -239,6 +259,21 @@ class ProceduralMesh final : public TetClusterSource {
       p[a] = domain_.lo[a] + (double(g[a]) + (face ? 0.0 : spec_.jitter * u)) * cell_[a];
     }
     return p;
+  }
+
+  /// A tet folded by the motion (cells too coarse for the wave's curvature) is refused.
+  void check_moved_tets(const ClusterData& d, size_t v, size_t sets, uint64_t cluster) const {
+    for (size_t set = 1; set < sets; ++set) {
+      const float* pos = d.positions.data() + set * v * 3;
+      auto at = [&](uint32_t w) { return Vec3d(pos[w * 3], pos[w * 3 + 1], pos[w * 3 + 2]); };
+      for (size_t t = 0; t < d.corners.size(); t += 4)
+        if (!(tet_volume6(at(d.corners[t]), at(d.corners[t + 1]), at(d.corners[t + 2]), at(d.corners[t + 3])) > 0))
+          throw Error(Errc::invalid_argument,
+                      fmt::format("move {} folds tetrahedron {} of cluster {} at step {} (cells of 1/{} are too coarse for "
+                                  "a displacement of {} of the domain): lower --move or raise --cells",
+                                  spec_.move, t / 4, cluster, set, spec_.cells, spec_.move * double(set)))
+              .with_field("--move");
+    }
   }
 
   ProceduralMeshSpec spec_;

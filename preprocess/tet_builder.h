@@ -62,7 +62,11 @@ std::unique_ptr<TetClusterSource> partition_mesh(TetMesh&& mesh, uint32_t cluste
 /// interior vertices jittered by up to `jitter` cells along each axis (deterministically, the
 /// same in every cluster that shares them); the whole replicated replicate^3 times side by
 /// side (the "bucky-like" scalability scene). Time steps: the field moved by `step_shift` of
-/// the domain along x per step. Clusters are blocks of cubes, generated on demand.
+/// the domain along x per step; with `move`, the vertices move too: at step s, x by
+/// move * s * sin(2 pi y) and y by move * s * sin(2 pi z) (fractions of the domain; a shear
+/// that keeps volume), the values staying with the vertices; a tet the motion folds (cells
+/// too coarse for the displacement) is an error naming --move.
+/// Clusters are blocks of cubes, generated on demand.
 struct ProceduralMeshSpec {
   std::string field;
   FieldParamValues params;
@@ -71,6 +75,7 @@ struct ProceduralMeshSpec {
   int replicate = 1;
   int steps = 1;
   double step_shift = 0.05;
+  double move = 0;
   uint64_t seed = 1;
 };
 std::unique_ptr<TetClusterSource> make_procedural_mesh(const ProceduralMeshSpec& spec, uint32_t cluster_tets);

@@ -97,11 +97,15 @@ RenderSession::RenderSession(const Scene& scene, const Options& options)
                                                     to_string(scene_.mode), to_string(dataset.kind())))
         .with_file(scene_.file)
         .with_field("mode");
-  if (scene_.time_step >= dataset.info().time_steps)
-    throw Error(Errc::invalid_argument, fmt::format("time step {} of a dataset with {} (0 to {})", scene_.time_step,
-                                                    dataset.info().time_steps, dataset.info().time_steps - 1))
+  if (scene_.time_step + scene_.time_count > dataset.info().time_steps) {
+    const std::string steps = scene_.time_count == 1 ? fmt::format("time step {}", scene_.time_step)
+                                                     : fmt::format("time steps {} to {}", scene_.time_step,
+                                                                   scene_.time_step + scene_.time_count - 1);
+    throw Error(Errc::invalid_argument, fmt::format("{} of a dataset with {} (0 to {})", steps, dataset.info().time_steps,
+                                                    dataset.info().time_steps - 1))
         .with_file(scene_.file)
-        .with_field("time_step");
+        .with_field(scene_.time_count == 1 ? "time_step" : "time_series");
+  }
   normalize_values(scene_, dataset.info().min_value, dataset.info().max_value);
   build_cache();
 }
@@ -170,6 +174,7 @@ FrameSetup RenderSession::setup(int frame, const FrameOutputs& outputs) const {
   setup.width = scene_.width;
   setup.height = scene_.height;
   setup.frame = frame;
+  setup.time_step = scene_.step_of(frame);
   setup.outputs = outputs;
   return setup;
 }

@@ -176,6 +176,7 @@ struct FrameSetup {
   Camera camera;
   int width = 0, height = 0;
   int frame = 0;
+  int time_step = 0;  ///< the dataset's time step this frame draws (Scene::step_of)
   FrameOutputs outputs;
 };
 

@@ -212,6 +212,13 @@ Scene read_scene(const nlohmann::json& j, const std::string& file) {
     throw top.error("transfer_function", "dvr mode needs a transfer function");
   s.sampling_rate = top.number("sampling_rate", 1.0, 1e-3, 1e3);
   s.time_step = int(top.integer("time_step", 0, 0, 1 << 20));
+  if (top.has("time_series")) {
+    if (top.has("time_step")) throw top.error("time_series", "give time_step or time_series (its first step), not both");
+    JsonObjectReader r = top.object("time_series");
+    s.time_step = int(r.integer("first", 0, 0, 1 << 20));
+    s.time_count = int(r.integer("count", 1, 1, 1 << 20));
+    r.finish();
+  }
   read_shading(top, s);
   if (s.shading.shadows && s.mode != RenderMode::iso)
     throw top.error("shading.shadows", "shadows are cast in iso mode only");

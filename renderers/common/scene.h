@@ -12,6 +12,7 @@
 /// prints, or, with "values": "normalized", fractions of the store's value range [min, max]
 /// (mapped when the store is opened: normalize_values()).
 
+#include <algorithm>
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -77,6 +78,7 @@ struct Scene {
   TransferFunction transfer_function;   ///< DVR and MIP colour
   double sampling_rate = 1.0;           ///< DVR: samples per voxel relative to the back end's default
   int time_step = 0;                    ///< the dataset's time step to draw (checked when it opens)
+  int time_count = 1;                   ///< "time_series": frames cycle through this many steps from time_step
   Shading shading;
   std::optional<Box3d> clip;            ///< normalised coordinates
   Vec3f background{0.0f};
@@ -84,7 +86,10 @@ struct Scene {
   CacheBudget cache;
   bool normalized_values = false;       ///< values are fractions of the store's range until mapped
 
-  int frames() const { return has_path ? camera.frames : 1; }
+  int frames() const { return has_path ? camera.frames : time_count; }
+  /// @brief The time step frame f draws: a time series cycles from time_step through
+  /// time_count steps (a camera path longer than the series starts it again).
+  int step_of(int frame) const { return time_step + (time_count > 1 ? std::max(frame, 0) % time_count : 0); }
   /// @brief Whether any value in [lo, hi] can contribute to the image (isovalue inside,
   /// non-zero opacity by the transfer function's summed-area table; MIP: everything).
   bool value_range_visible(double lo, double hi) const;

@@ -138,20 +138,27 @@ struct ClusterIndex {
 class TetReference final : public Renderer {
  public:
   explicit TetReference(const RenderContext& ctx)
-      : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), tets_(ctx.tets()), shading_(scene_.shading, geo_),
-        step_(uint32_t(scene_.time_step)) {
+      : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), tets_(ctx.tets()), shading_(scene_.shading, geo_) {
     const auto clusters = tets_.clusters();
     std::vector<float> boxes;
     boxes.reserve(clusters.size() * 6);
-    visible_.resize(clusters.size());
     for (size_t c = 0; c < clusters.size(); ++c) {
       const TetCluster& e = clusters[c];
       boxes.insert(boxes.end(), {e.lo[0], e.lo[1], e.lo[2], e.hi[0], e.hi[1], e.hi[2]});
-      const TetStepRange r = tets_.range(c, int(step_));
-      visible_[c] = scene_.mode == RenderMode::mip || scene_.value_range_visible(r.min, r.max);
     }
     clusters_ = BoxTree(boxes);
     clip_ = Box3d(geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi));
+  }
+
+  void begin_frame(const FrameSetup& setup) override {
+    if (!visible_.empty() && step_ == uint32_t(setup.time_step)) return;
+    step_ = uint32_t(setup.time_step);
+    const size_t clusters = tets_.clusters().size();
+    visible_.resize(clusters);
+    for (size_t c = 0; c < clusters; ++c) {
+      const TetStepRange r = tets_.range(c, int(step_));
+      visible_[c] = scene_.mode == RenderMode::mip || scene_.value_range_visible(r.min, r.max);
+    }
   }
 
   void render_tile(const FrameSetup& setup, const Tile& tile, FrameBuffers& out, RayCounters& counters) const override {
@@ -428,7 +435,7 @@ class TetReference final : public Renderer {
   const VolumeGeometry& geo_;
   const TetView& tets_;
   ShadingModel shading_;
-  uint32_t step_;
+  uint32_t step_ = 0;  ///< the frame's time step (begin_frame)
   Box3d clip_;
   BoxTree clusters_;
   std::vector<bool> visible_;

@@ -143,6 +143,48 @@ BoxBvh build_bvh(const std::vector<Bounds4>& items, BuildMethod method, uint32_t
   return std::move(b.out);
 }
 
+namespace {
+
+/// Tet t's {x, y, z, value} bounds at `step`; false when it must stay out of the BVH (not
+/// positively oriented, not finite, or corners outside the page): stores keep only valid
+/// tets, and a page from anywhere else must not bring a degenerate one in.
+bool tet_bounds(const TetClusterPage& page, const float* pos, const float* val, uint32_t t, Bounds4& b) {
+  const uint32_t* q = page.corners + 4 * size_t(t);
+  for (int a = 0; a < 4; ++a) b.lo[a] = kInf, b.hi[a] = -kInf;
+  Vec3d p[4];
+  bool finite = true;
+  for (int k = 0; k < 4; ++k) {
+    if (q[k] >= page.vertex_count) return false;
+    const float* v = pos + 3 * size_t(q[k]);
+    p[k] = Vec3d(v[0], v[1], v[2]);
+    for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], v[a]), b.hi[a] = std::max(b.hi[a], v[a]);
+    b.lo[3] = std::min(b.lo[3], val[q[k]]), b.hi[3] = std::max(b.hi[3], val[q[k]]);
+    finite = finite && std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]) && std::isfinite(val[q[k]]);
+  }
+  return finite && dot(cross(p[1] - p[0], p[2] - p[0]), p[3] - p[0]) > 0;
+}
+
+void unite(float* lo, float* hi, const float* olo, const float* ohi) {
+  for (int a = 0; a < 4; ++a) lo[a] = std::min(lo[a], olo[a]), hi[a] = std::max(hi[a], ohi[a]);
+}
+
+}  // namespace
+
+void refit_bvh(BoxBvh& bvh, const Bounds4* slot_bounds) {
+  // Nodes are in depth-first order with the left child next: walking them backwards meets
+  // every child before its parent.
+  for (size_t i = bvh.nodes.size(); i-- > 0;) {
+    BvhNode& n = bvh.nodes[i];
+    for (int a = 0; a < 4; ++a) n.lo[a] = kInf, n.hi[a] = -kInf;
+    if (n.leaf()) {
+      for (uint32_t s = n.index; s < n.index + n.count; ++s) unite(n.lo, n.hi, slot_bounds[s].lo, slot_bounds[s].hi);
+    } else {
+      unite(n.lo, n.hi, bvh.nodes[i + 1].lo, bvh.nodes[i + 1].hi);
+      unite(n.lo, n.hi, bvh.nodes[n.index].lo, bvh.nodes[n.index].hi);
+    }
+  }
+}
+
 ClusterBvh ClusterBvh::build(const TetClusterPage& page, uint32_t step, BuildMethod method, uint32_t leaf_size) {
   const float* pos = page.positions_at(step);
   const float* val = page.values_at(step);
@@ -150,25 +192,10 @@ ClusterBvh ClusterBvh::build(const TetClusterPage& page, uint32_t step, BuildMet
   std::vector<uint32_t> tet_of;  // item -> tet
   items.reserve(page.tet_count);
   ClusterBvh out;
+  out.step = step;
   for (uint32_t t = 0; t < page.tet_count; ++t) {
-    const uint32_t* q = page.corners + 4 * size_t(t);
     Bounds4 b;
-    for (int a = 0; a < 4; ++a) b.lo[a] = kInf, b.hi[a] = -kInf;
-    Vec3d p[4];
-    bool finite = true;
-    for (int k = 0; k < 4; ++k) {
-      if (q[k] >= page.vertex_count) {
-        finite = false;
-        break;
-      }
-      const float* v = pos + 3 * size_t(q[k]);
-      p[k] = Vec3d(v[0], v[1], v[2]);
-      for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], v[a]), b.hi[a] = std::max(b.hi[a], v[a]);
-      b.lo[3] = std::min(b.lo[3], val[q[k]]), b.hi[3] = std::max(b.hi[3], val[q[k]]);
-      finite = finite && std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]) && std::isfinite(val[q[k]]);
-    }
-    // Stores keep only valid tets; a page from anywhere else must not bring a degenerate one in.
-    if (!finite || !(dot(cross(p[1] - p[0], p[2] - p[0]), p[3] - p[0]) > 0)) {
+    if (!tet_bounds(page, pos, val, t, b)) {
       ++out.skipped;
       continue;
     }
@@ -183,6 +210,31 @@ ClusterBvh ClusterBvh::build(const TetClusterPage& page, uint32_t step, BuildMet
     out.tet_range[2 * s + 1] = items[item].hi[3];
     out.bvh.order[s] = tet_of[item];
   }
+  return out;
+}
+
+std::optional<ClusterBvh> ClusterBvh::refit(const TetClusterPage& page, uint32_t new_step) const {
+  const float* pos = page.positions_at(new_step);
+  const float* val = page.values_at(new_step);
+  const size_t slots = bvh.order.size();
+  if (slots + skipped != page.tet_count) return std::nullopt;
+  std::vector<Bounds4> slot_bounds(slots);
+  for (size_t s = 0; s < slots; ++s)
+    if (bvh.order[s] >= page.tet_count || !tet_bounds(page, pos, val, bvh.order[s], slot_bounds[s])) return std::nullopt;
+  if (skipped > 0) {  // a tet left out at the build step must still be invalid at this one
+    std::vector<uint8_t> in_bvh(page.tet_count, 0);
+    for (uint32_t t : bvh.order) in_bvh[t] = 1;
+    Bounds4 b;
+    for (uint32_t t = 0; t < page.tet_count; ++t)
+      if (!in_bvh[t] && tet_bounds(page, pos, val, t, b)) return std::nullopt;
+  }
+  ClusterBvh out;
+  out.bvh = bvh;
+  out.skipped = skipped;
+  out.step = new_step;
+  refit_bvh(out.bvh, slot_bounds.data());
+  out.tet_range.resize(slots * 2);
+  for (size_t s = 0; s < slots; ++s) out.tet_range[2 * s] = slot_bounds[s].lo[3], out.tet_range[2 * s + 1] = slot_bounds[s].hi[3];
   return out;
 }
 

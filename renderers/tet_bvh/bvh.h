@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "dataset/tet.h"
@@ -45,6 +46,10 @@ struct BoxBvh {
 };
 /// @brief Builds over `items`; leaves hold at most `leaf_size` items.
 BoxBvh build_bvh(const std::vector<Bounds4>& items, BuildMethod method, uint32_t leaf_size);
+/// @brief Recomputes every node's bounds, children before parents, from `slot_bounds`: the
+/// bounds of the item in each leaf slot (slot s holds item bvh.order[s]). The topology stays;
+/// for bounds that only grew or moved a little, traversal stays about as fast as a rebuild's.
+void refit_bvh(BoxBvh& bvh, const Bounds4* slot_bounds);
 
 /// @brief A cluster's BVH for one time step, with each leaf slot's tet and its value range
 /// (the leaf tests a tet's own range before it extracts the tet's isopolygon).
@@ -54,7 +59,12 @@ struct ClusterBvh {
   uint32_t skipped = 0;          ///< tets left out: not positively oriented, or not finite
   size_t bytes() const { return bvh.bytes() + tet_range.size() * sizeof(float); }
 
+  uint32_t step = 0;             ///< the time step the bounds are for
+
   static ClusterBvh build(const TetClusterPage& page, uint32_t step, BuildMethod method, uint32_t leaf_size);
+  /// @brief This BVH's topology with its bounds refitted to `step` (moved vertices, new
+  /// values); nothing when the set of valid tets differs at that step (a rebuild is needed).
+  std::optional<ClusterBvh> refit(const TetClusterPage& page, uint32_t step) const;
 };
 
 }  // namespace brickyard::tet_bvh

@@ -3,9 +3,12 @@
 /// @brief tet_bvh: coherent ray tracing of tetrahedral isosurfaces (Wald, Friedrich, Knoll and
 /// Hansen) on brickyard's cache.
 ///
-/// - A top-level BVH over the cluster table (bounds and the scene's time step's value range)
+/// - A top-level BVH over the cluster table (bounds and the frame's time step's value range)
 ///   ties the clusters together; a cluster's own 4D BVH (bvh.h) is built the first time its
-///   page is resident, and kept beside the cache within a memory budget.
+///   page is resident, and kept beside the cache within a memory budget. When the time step
+///   changes the top BVH is refitted, and each cluster's BVH is refitted when a packet next
+///   reaches it (the clusters are the subtrees, refitted in parallel by the tiles), or one BVH
+///   per step is kept (bvh_per_step=1).
 /// - Packets of packet x packet rays (16 x 16, a tile, by default; 1: single rays) traverse
 ///   both: the implicit test first (a node's value range against every isovalue at once), the
 ///   first active ray's box test speculatively, then the packet's frustum by interval
@@ -47,6 +50,7 @@ struct Params {
   int layers{};
   double layer_opacity{};
   double bvh_cache_mib{};
+  bool bvh_per_step{};
   bool corner_culling{};
 };
 const ParamTable<Params>& params_table();
@@ -54,7 +58,7 @@ const ParamTable<Params>& params_table();
 /// Per-frame figures, summed over tiles (the paper's Table 4 and the cache's side).
 struct Counters {
   std::atomic<uint64_t> packet_box_tests{0}, ray_box_tests{0}, isorange_tests{0}, extractions{0}, ray_polygon_tests{0},
-      full_miss_rays{0}, full_hit_rays{0}, clusters_touched{0}, clusters_missing{0}, bvh_builds{0}, bvh_build_ns{0};
+      full_miss_rays{0}, full_hit_rays{0}, clusters_touched{0}, clusters_missing{0}, bvh_builds{0}, bvh_build_ns{0}, bvh_refits{0}, bvh_refit_ns{0};
   void reset();
 };
 
@@ -110,7 +114,10 @@ class TetBvhRenderer final : public Renderer {
     std::shared_ptr<const ClusterBvh> bvh;
     uint64_t last_frame = 0;
   };
+  /// The cluster's BVH for the frame's step: cached, refitted from another step's, or built.
   std::shared_ptr<const ClusterBvh> cluster_bvh(uint64_t cluster, const TetClusterPage& page) const;
+  /// The frame's time step: the clusters' value ranges for it, the top BVH refitted to them.
+  void set_step(uint32_t step);
   void note_missing(uint32_t cluster, float priority, uint32_t tile) const;
   void trace_cluster(Packet& p, const TetClusterPage& page, const ClusterBvh& bvh, int first, RayCounters& counters) const;
   void leaf(Packet& p, const TetClusterPage& page, const ClusterBvh& bvh, const BvhNode& node, int first) const;
@@ -129,7 +136,7 @@ class TetBvhRenderer final : public Renderer {
   const TetView& tets_;
   Params p_;
   ShadingModel shading_;
-  uint32_t step_;
+  uint32_t step_ = 0;
   std::vector<double> iso_;
   float iso_lo_ = 0, iso_hi_ = 0;
   Box3d clip_;

@@ -33,6 +33,9 @@ const ParamTable<Params>& params_table() {
       {"layer_opacity", &Params::layer_opacity, 0.5, 0.01, 1.0, "layers > 1: the opacity of each layer"},
       {"bvh_cache", &Params::bvh_cache_mib, 256, 1, 1 << 20,
        "MiB of cluster BVHs kept beside the cache (the least recently used are dropped, and rebuilt when needed)"},
+      {"bvh_per_step", &Params::bvh_per_step, 0, 0, 1,
+       "time-varying meshes: 1: a cluster BVH built for each time step drawn (kept while the BVH cache holds them); 0: one "
+       "BVH per cluster, refitted when the step changes (moved vertices, new values)"},
       {"corner_culling", &Params::corner_culling, 1, 0, 1,
        "1: a packet's four corner rays cull an isopolygon all its rays miss, and spare the edge tests of one they all hit; "
        "0: every ray's edge tests"},
@@ -42,50 +45,82 @@ const ParamTable<Params>& params_table() {
 
 void Counters::reset() {
   for (auto* c : {&packet_box_tests, &ray_box_tests, &isorange_tests, &extractions, &ray_polygon_tests, &full_miss_rays,
-                  &full_hit_rays, &clusters_touched, &clusters_missing, &bvh_builds, &bvh_build_ns})
+                  &full_hit_rays, &clusters_touched, &clusters_missing, &bvh_builds, &bvh_build_ns, &bvh_refits,
+                  &bvh_refit_ns})
     c->store(0, std::memory_order_relaxed);
 }
 
 TetBvhRenderer::TetBvhRenderer(const RenderContext& ctx, const Params& p)
-    : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), tets_(ctx.tets()), p_(p), shading_(scene_.shading, geo_),
-      step_(uint32_t(scene_.time_step)) {
+    : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), tets_(ctx.tets()), p_(p), shading_(scene_.shading, geo_) {
   for (const Isosurface& s : scene_.isosurfaces) iso_.push_back(s.value);
   clip_ = Box3d(geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi));
-  const auto clusters = tets_.clusters();
-  cluster_bounds_.resize(clusters.size());
-  for (size_t c = 0; c < clusters.size(); ++c) {
-    Bounds4& b = cluster_bounds_[c];
-    const TetStepRange r = tets_.range(c, int(step_));
-    for (int a = 0; a < 3; ++a) b.lo[a] = clusters[c].lo[a], b.hi[a] = clusters[c].hi[a];
-    b.lo[3] = r.min, b.hi[3] = r.max;
-  }
-  top_ = build_bvh(cluster_bounds_, BuildMethod::bih, 1);
   bvh_budget_ = size_t(p_.bvh_cache_mib * double(1 << 20));
 }
 
+void TetBvhRenderer::set_step(uint32_t step) {
+  // The top BVH's topology comes from the clusters' boxes, which cover every step; a new step
+  // changes only the value ranges, so a refit gives what a rebuild would.
+  const auto clusters = tets_.clusters();
+  const bool first = cluster_bounds_.empty() && !clusters.empty();
+  cluster_bounds_.resize(clusters.size());
+  for (size_t c = 0; c < clusters.size(); ++c) {
+    Bounds4& b = cluster_bounds_[c];
+    const TetStepRange r = tets_.range(c, int(step));
+    for (int a = 0; a < 3; ++a) b.lo[a] = clusters[c].lo[a], b.hi[a] = clusters[c].hi[a];
+    b.lo[3] = r.min, b.hi[3] = r.max;
+  }
+  if (first) {
+    top_ = build_bvh(cluster_bounds_, BuildMethod::bih, 1);
+  } else {
+    std::vector<Bounds4> slots(top_.order.size());
+    for (size_t s = 0; s < slots.size(); ++s) slots[s] = cluster_bounds_[top_.order[s]];
+    refit_bvh(top_, slots.data());
+  }
+  step_ = step;
+}
+
 std::shared_ptr<const ClusterBvh> TetBvhRenderer::cluster_bvh(uint64_t cluster, const TetClusterPage& page) const {
+  // Per-step BVHs are cached by (cluster, step); refitted ones by cluster, for the step they
+  // were last refitted to.
+  const uint64_t key = p_.bvh_per_step ? cluster * uint64_t(tets_.time_steps()) + step_ : cluster;
+  std::shared_ptr<const ClusterBvh> stale;
   {
     std::lock_guard lock(cache_mutex_);
-    if (auto it = bvhs_.find(cluster); it != bvhs_.end()) {
+    if (auto it = bvhs_.find(key); it != bvhs_.end()) {
       it->second.last_frame = frame_;
-      return it->second.bvh;
+      if (it->second.bvh->step == step_) return it->second.bvh;
+      stale = it->second.bvh;
     }
   }
-  // Built outside the lock: two tiles may build the same cluster at once; the second copy is
-  // dropped.
+  // Built or refitted outside the lock: two tiles may do the same cluster at once; the second
+  // copy is dropped.
   Stopwatch watch;
-  auto built = std::make_shared<const ClusterBvh>(
-      ClusterBvh::build(page, step_, p_.sah ? BuildMethod::sah : BuildMethod::bih, uint32_t(p_.leaf_size)));
-  counters_.bvh_builds.fetch_add(1, std::memory_order_relaxed);
-  counters_.bvh_build_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
+  std::shared_ptr<const ClusterBvh> built;
+  if (stale) {
+    if (std::optional<ClusterBvh> refitted = stale->refit(page, step_)) {
+      built = std::make_shared<const ClusterBvh>(std::move(*refitted));
+      counters_.bvh_refits.fetch_add(1, std::memory_order_relaxed);
+      counters_.bvh_refit_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
+    }
+  }
+  if (!built) {
+    built = std::make_shared<const ClusterBvh>(
+        ClusterBvh::build(page, step_, p_.sah ? BuildMethod::sah : BuildMethod::bih, uint32_t(p_.leaf_size)));
+    counters_.bvh_builds.fetch_add(1, std::memory_order_relaxed);
+    counters_.bvh_build_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
+  }
   std::lock_guard lock(cache_mutex_);
-  auto [it, added] = bvhs_.try_emplace(cluster, CachedBvh{built, frame_});
-  if (!added) return it->second.bvh;
+  auto [it, added] = bvhs_.try_emplace(key, CachedBvh{built, frame_});
+  if (!added) {
+    if (it->second.bvh->step == step_) return it->second.bvh;
+    bvh_bytes_ -= it->second.bvh->bytes();
+    it->second.bvh = built;
+  }
   bvh_bytes_ += built->bytes();
   while (bvh_bytes_ > bvh_budget_ && bvhs_.size() > 1) {
     auto oldest = bvhs_.end();
     for (auto e = bvhs_.begin(); e != bvhs_.end(); ++e)
-      if (e->first != cluster && (oldest == bvhs_.end() || e->second.last_frame < oldest->second.last_frame)) oldest = e;
+      if (e->first != key && (oldest == bvhs_.end() || e->second.last_frame < oldest->second.last_frame)) oldest = e;
     bvh_bytes_ -= oldest->second.bvh->bytes();
     bvhs_.erase(oldest);  // a tile still tracing it keeps its copy alive
   }
@@ -102,6 +137,7 @@ void TetBvhRenderer::note_missing(uint32_t cluster, float priority, uint32_t til
 void TetBvhRenderer::begin_frame(const FrameSetup& setup) {
   ++frame_;
   counters_.reset();
+  if (cluster_bounds_.empty() || uint32_t(setup.time_step) != step_) set_step(uint32_t(setup.time_step));
   frame_exact_ = p_.exact || complete_frames_;
   passes_ = 0;
   tiles_x_ = (setup.width + kTileSize - 1) / kTileSize;
@@ -200,6 +236,9 @@ void TetBvhRenderer::add_statistics(FrameStats& stats) const {
                    {"clusters_missing", v(counters_.clusters_missing)},
                    {"bvh_builds", v(counters_.bvh_builds)},
                    {"bvh_build_ms", v(counters_.bvh_build_ns) * 1e-6},
+                   {"bvh_refits", v(counters_.bvh_refits)},
+                   {"bvh_refit_ms", v(counters_.bvh_refit_ns) * 1e-6},
+                   {"time_step", double(step_)},
                    {"bvh_cached", double(cached)},
                    {"bvh_bytes", double(bvh_bytes_)},
                    {"unfinished_rays", double(last_missing_)}};

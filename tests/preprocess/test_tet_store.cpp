@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <array>
 #include <limits>
 #include <map>
@@ -274,6 +275,67 @@ TEST(TetStore, AProceduralMeshStreamsClustersWithSharedVerticesAtTheSamePlace) {
     }
   }
   EXPECT_NEAR(volume, 8.0, 1e-5);
+}
+
+TEST(TetStore, AProceduralMeshWithMovingVerticesShearsItInEveryStep) {
+  testing::TempDir dir;
+  ProceduralMeshSpec spec;
+  spec.field = "sphere";
+  spec.cells = 12;
+  spec.jitter = 0.1;
+  spec.steps = 3;
+  spec.move = 0.05;
+  auto source = make_procedural_mesh(spec, 6 * 64);
+  EXPECT_TRUE(source->moving());
+  TetBuildOptions o;
+  o.cluster_tets = 6 * 64;
+  build_tet_store(*source, dir.file("m.store"), o);
+  Store store(dir.file("m.store"));
+  ASSERT_TRUE(store.manifest().mesh.moving);
+  std::vector<std::byte> page(store.manifest().mesh.page_bytes);
+  auto txn = store.begin_read();
+  double moved = 0, volume[3] = {0, 0, 0};
+  for (size_t c = 0; c < store.clusters().size(); ++c) {
+    store.read_page(txn, {RecordKind::tet_cluster, c}, page);
+    const TetClusterPage p = TetClusterPage::view(page);
+    ASSERT_EQ(p.position_sets, 3u);
+    const TetCluster& e = store.clusters()[c];
+    const float* p0 = p.positions_at(0);
+    for (uint32_t s = 0; s < 3; ++s) {
+      const float* ps = p.positions_at(s);
+      for (uint32_t v = 0; v < p.vertex_count; ++v) {
+        // A shear: x moves with y, y with z, z stays; the cluster's box holds every step.
+        EXPECT_NEAR(ps[3 * v], p0[3 * v] + 0.05 * s * std::sin(2 * M_PI * p0[3 * v + 1]), 1e-6);
+        EXPECT_EQ(ps[3 * v + 2], p0[3 * v + 2]);
+        for (int a = 0; a < 3; ++a) EXPECT_TRUE(ps[3 * v + a] >= e.lo[a] && ps[3 * v + a] <= e.hi[a]);
+        moved = std::max(moved, double(std::abs(ps[3 * v + 1] - p0[3 * v + 1])));
+      }
+      for (uint32_t t = 0; t < p.tet_count; ++t) {
+        auto at = [&](int i) {
+          const uint32_t w = p.corners[4 * t + uint32_t(i)];
+          return Vec3d(ps[3 * w], ps[3 * w + 1], ps[3 * w + 2]);
+        };
+        const double v6 = tet_volume6(at(0), at(1), at(2), at(3));
+        EXPECT_GT(v6, 0) << "tet " << t << " of cluster " << c << " in step " << s;
+        volume[s] += v6 / 6;
+      }
+    }
+  }
+  EXPECT_GT(moved, 0.05);
+  for (int s = 0; s < 3; ++s) EXPECT_NEAR(volume[s], 1.0, 2e-3) << s;  // a shear keeps the volume
+
+  // A displacement the cells cannot follow folds tets: refused, naming the option.
+  spec.cells = 4;
+  spec.move = 0.3;
+  auto folding = make_procedural_mesh(spec, 6 * 64);
+  try {
+    build_tet_store(*folding, dir.file("folded.store"), o);
+    ADD_FAILURE() << "a folding motion was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.field(), "--move") << e.what();
+    EXPECT_NE(std::string(e.what()).find("folds tetrahedron"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.file("folded.store") + "/manifest.json"));
 }
 
 TEST(TetStore, AnInterruptedBuildLeavesNoCompleteStore) {

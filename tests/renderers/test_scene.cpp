@@ -246,6 +246,25 @@ TEST(Scene, RelativeDatasetResolvesAgainstTheSceneFilesDirectory) {
   EXPECT_EQ(load_scene(file).dataset, (dir.path() / "v.store").string());
 }
 
+TEST(Scene, ATimeSeriesCyclesItsStepsOverTheFrames) {
+  const Scene still = parse_scene(scene_json(R"(, "time_step": 2)"), "s.json");
+  EXPECT_EQ(still.frames(), 1);
+  EXPECT_EQ(still.step_of(0), 2);
+  EXPECT_EQ(still.step_of(5), 2);
+  const Scene series = parse_scene(scene_json(R"(, "time_series": {"first": 1, "count": 3})"), "s.json");
+  EXPECT_EQ(series.frames(), 3);  // a still camera: one frame a step
+  EXPECT_EQ(series.step_of(0), 1);
+  EXPECT_EQ(series.step_of(2), 3);
+  EXPECT_EQ(series.step_of(3), 1);
+  const Scene path = parse_scene(scene_json("", R"("camera_path": {"frames": 7, "keyframes": [
+      {"eye": [2, 0, 0], "target": [0.5, 0.5, 0.5]}, {"eye": [0, 2, 0], "target": [0.5, 0.5, 0.5]}]},
+      "time_series": {"count": 2})"),
+                                 "s.json");
+  EXPECT_EQ(path.frames(), 7);  // the path's frames, the steps starting again
+  EXPECT_EQ(path.step_of(6), 0);
+  EXPECT_EQ(path.step_of(5), 1);
+}
+
 TEST(Scene, CameraPathInline) {
   const Scene s = parse_scene(scene_json("", R"("camera_path": { "frames": 7, "fov_degrees": 30, "keyframes": [
       { "eye": [2, 0, 0], "target": [0.5, 0.5, 0.5] },
@@ -355,6 +374,10 @@ INSTANTIATE_TEST_SUITE_P(
     Scene, SceneRejects,
     ::testing::Values(
         // unknown keys, top level and nested, with the known keys listed
+        BadScene{"TimeStepAndTimeSeries", scene_json(R"(, "time_step": 1, "time_series": {"count": 2})"),
+                 {"'time_series'", "not both"}},
+        BadScene{"EmptyTimeSeries", scene_json(R"(, "time_series": {"count": 0})"), {"'time_series.count'"}},
+        BadScene{"UnknownTimeSeriesKey", scene_json(R"(, "time_series": {"last": 3})"), {"'time_series.last'", "unknown key"}},
         BadScene{"UnknownTopLevelKey", scene_json(R"(, "colour": [1, 0, 0])"), {"'colour'", "unknown key", "'background'"}},
         BadScene{"MisspelledShadingKey", scene_json(R"(, "shading": {"ligth": "point"})"), {"'shading.ligth'", "unknown key", "'light'"}},
         BadScene{"UnknownIsosurfaceKey", scene_json(R"(, "isosurfaces": [{"value": 1}, {"value": 2, "colour": [1, 0, 0]}])"),

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <map>
+#include <optional>
 #include <string>
 
 #include "renderers/common/metrics.h"
@@ -275,4 +276,129 @@ TEST(TetBvhBuild, LeavesHoldAtMostTheirSizeAndNodesBoundTheirTets) {
 }
 
 }  // namespace
+}  // namespace brickyard
+
+namespace brickyard {
+namespace {
+
+/// A sphere's distance on a lattice whose vertices move (a shear growing with the step, so
+/// every tet keeps its orientation) while the field moves along x.
+TetMesh moving_sphere(int steps) {
+  TetMesh m = lattice_mesh(10, 0.15, [](const Vec3d& p) { return length(p - Vec3d(0.5)); }, steps);
+  const double two_pi = 2 * 3.14159265358979323846;
+  for (int s = 1; s < steps; ++s) {
+    std::vector<float> moved = m.positions;
+    for (size_t v = 0; v < m.vertex_count(); ++v) {
+      const double y = m.positions[3 * v + 1], z = m.positions[3 * v + 2];
+      moved[3 * v] = float(m.positions[3 * v] + 0.04 * s * std::sin(two_pi * y));
+      moved[3 * v + 1] = float(y + 0.03 * s * std::sin(two_pi * z));
+    }
+    m.step_positions.push_back(std::move(moved));
+  }
+  return m;
+}
+
+/// Frames 0 .. count-1 of a time series, each one exact frame (no settling: the frame's own
+/// statistics show what it built and refitted).
+std::vector<FrameBuffers> series_frames(const Scene& scene, std::map<std::string, double> params,
+                                        std::vector<FrameStats>* stats = nullptr) {
+  RenderSession::Options o;
+  o.backend = "tet_bvh";
+  o.params = std::move(params);
+  o.params["exact"] = 1;
+  RenderSession session(scene, o);
+  std::vector<FrameBuffers> out(size_t(scene.frames()));
+  for (int f = 0; f < scene.frames(); ++f) {
+    const FrameStats s = session.render(f, out[size_t(f)], {.depth = true, .normals = true});
+    if (stats) stats->push_back(s);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_F(TetBvh, RefitEqualsRebuildForMovingVertices) {
+  build(moving_sphere(3), dir_.file("moving.store"), 256);
+  ASSERT_TRUE(Store(dir_.file("moving.store")).manifest().mesh.moving);
+  const std::string body = std::string(kSphereIso) + R"(, "time_series": {"first": 0, "count": 3})";
+  const Scene series = tet_scene(dir_.file("moving.store"), body, 64, "tet_bvh");
+  ASSERT_EQ(series.frames(), 3);
+  std::vector<FrameStats> refit_stats, per_step_stats;
+  const std::vector<FrameBuffers> refitted = series_frames(series, {}, &refit_stats);
+  const std::vector<FrameBuffers> per_step = series_frames(series, {{"bvh_per_step", 1}}, &per_step_stats);
+  for (int f = 1; f < 3; ++f) {
+    EXPECT_GT(refit_stats[size_t(f)].backend_value("bvh_refits"), 0) << f;
+    EXPECT_EQ(per_step_stats[size_t(f)].backend_value("bvh_refits"), 0) << f;
+    EXPECT_GT(per_step_stats[size_t(f)].backend_value("bvh_builds"), 0) << f;
+    EXPECT_EQ(refit_stats[size_t(f)].backend_value("time_step"), f);
+  }
+  for (int f = 0; f < 3; ++f) {
+    // The same step drawn by a fresh renderer (BVHs built for that step alone), and by the
+    // reference.
+    Scene still = tet_scene(dir_.file("moving.store"), std::string(kSphereIso) + R"(, "time_step": )" + std::to_string(f),
+                            64, "tet_bvh");
+    const FrameBuffers fresh = bvh_frame(still);
+    EXPECT_EQ(differing_pixels(refitted[size_t(f)], fresh), 0) << "step " << f;
+    EXPECT_EQ(differing_pixels(per_step[size_t(f)], fresh), 0) << "step " << f;
+    still.backend = "reference";
+    RenderSession ref(still);
+    FrameBuffers truth;
+    ref.render(0, truth, {.depth = true, .normals = true});
+    EXPECT_LE(differing_pixels(fresh, truth, 1e-5f), 2) << "step " << f;
+  }
+  // The steps differ: the test would catch a refit that left step 0's bounds.
+  EXPECT_GT(differing_pixels(refitted[0], refitted[2]), 200);
+}
+
+TEST(TetBvhTree, ARefitKeepsTheTopologyAndBoundsEveryNodesItems) {
+  testing::TempDir dir;
+  build(moving_sphere(3), dir.file("moving.store"), 6000);
+  const Store store(dir.file("moving.store"));
+  ASSERT_EQ(store.clusters().size(), 1u);
+  std::vector<std::byte> bytes(store.manifest().mesh.page_bytes);
+  auto txn = store.begin_read();
+  store.read_page(txn, {RecordKind::tet_cluster, 0}, bytes);
+  const TetClusterPage page = TetClusterPage::view(bytes);
+  using tet_bvh::BuildMethod;
+  using tet_bvh::ClusterBvh;
+  const ClusterBvh at0 = ClusterBvh::build(page, 0, BuildMethod::bih, 12);
+  // Refitted to its own step, a BVH is unchanged to the bit.
+  const std::optional<ClusterBvh> same = at0.refit(page, 0);
+  ASSERT_TRUE(same);
+  ASSERT_EQ(same->bvh.nodes.size(), at0.bvh.nodes.size());
+  EXPECT_EQ(std::memcmp(same->bvh.nodes.data(), at0.bvh.nodes.data(), at0.bvh.nodes.size() * sizeof(tet_bvh::BvhNode)), 0);
+  EXPECT_EQ(same->tet_range, at0.tet_range);
+  // Refitted to step 2: the same order, and every node the exact union of its items at step 2.
+  const std::optional<ClusterBvh> at2 = at0.refit(page, 2);
+  ASSERT_TRUE(at2);
+  EXPECT_EQ(at2->bvh.order, at0.bvh.order);
+  EXPECT_EQ(at2->step, 2u);
+  const ClusterBvh rebuilt = ClusterBvh::build(page, 2, BuildMethod::bih, 12);
+  for (int a = 0; a < 4; ++a) {  // the roots bound the same tets
+    EXPECT_EQ(at2->bvh.nodes[0].lo[a], rebuilt.bvh.nodes[0].lo[a]) << a;
+    EXPECT_EQ(at2->bvh.nodes[0].hi[a], rebuilt.bvh.nodes[0].hi[a]) << a;
+  }
+  const float* pos = page.positions_at(2);
+  const float* val = page.values_at(2);
+  int moved = 0;
+  for (size_t i = 0; i < at2->bvh.nodes.size(); ++i) {
+    const tet_bvh::BvhNode& n = at2->bvh.nodes[i];
+    const tet_bvh::BvhNode& old = at0.bvh.nodes[i];
+    moved += std::memcmp(n.lo, old.lo, sizeof n.lo) != 0;
+    if (!n.leaf()) continue;
+    float lo[4] = {INFINITY, INFINITY, INFINITY, INFINITY}, hi[4] = {-INFINITY, -INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t s = n.index; s < n.index + n.count; ++s)
+      for (int k = 0; k < 4; ++k) {
+        const uint32_t v = page.corners[4 * size_t(at2->bvh.order[s]) + size_t(k)];
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], pos[3 * v + a]), hi[a] = std::max(hi[a], pos[3 * v + a]);
+        lo[3] = std::min(lo[3], val[v]), hi[3] = std::max(hi[3], val[v]);
+      }
+    for (int a = 0; a < 4; ++a) {
+      ASSERT_EQ(n.lo[a], lo[a]) << "leaf " << i;
+      ASSERT_EQ(n.hi[a], hi[a]) << "leaf " << i;
+    }
+  }
+  EXPECT_GT(moved, int(at2->bvh.nodes.size()) / 2);
+}
+
 }  // namespace brickyard
