@@ -40,25 +40,8 @@ Exit status: 0 on success, 2 for a bad argument, 3 when the camera check fails, 
 EOF
 }
 
-die() {  # usage error
-  echo "peers: $*" >&2
-  echo "peers: run with --help for the options" >&2
-  exit 2
-}
-
-fail() {
-  echo "peers: $*" >&2
-  exit 1
-}
-
-is_int() { [[ "$1" =~ ^[0-9]+$ ]]; }
-is_number() { [[ "$1" =~ ^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$ ]]; }
-is_vec3() {
-  local IFS=, parts
-  read -r -a parts <<<"$1"
-  [ "${#parts[@]}" -eq 3 ] && is_number "${parts[0]}" && is_number "${parts[1]}" && is_number "${parts[2]}" &&
-    [[ "$1" != *, ]]
-}
+me=peers
+. "$here/lib.sh"
 
 backend=octree_cgt field=wavelet size=256 iso=160 width=512 height=512 frames=8 threads=2
 eye=1.6,-1.1,1.4 target=0.5,0.5,0.45 up=0,0,1 fov=35
@@ -101,12 +84,9 @@ done
 
 # --- brickyard: built, and it knows the back end and the field ----------------------------
 
-[ -x "$brickyard" ] || fail "$brickyard: no brickyard executable; build it first (cmake --preset release && cmake --build --preset release), or name one with --brickyard"
+need_brickyard "$brickyard"
 by=("$brickyard" -q -j "$threads")
-known_backends="$("$brickyard" render --list-backends | awk '/^[^ ]/ {print $1}')"
-if ! grep -qx -- "$backend" <<<"$known_backends"; then
-  die "--backend: this brickyard has no back end '$backend' (it has: $(echo $known_backends | tr ' ' ','))"
-fi
+need_backend "$brickyard" "$backend"
 known_fields="$("$brickyard" generate --list | awk '/^[^ ]/ {print $1}')"
 if ! grep -qx -- "$field" <<<"$known_fields"; then
   die "--field: this brickyard has no field '$field' (it has: $(echo $known_fields | tr ' ' ','))"
@@ -114,42 +94,11 @@ fi
 
 # --- Debian packages ------------------------------------------------------------------------
 
-py=/usr/bin/python3  # Debian's: python3-vtk9 and python3-numpy are built for it, not for another python3 on PATH
-need=()
-for p in python3 python3-vtk9 python3-numpy libembree-dev g++ pkg-config; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || need+=("$p")
-done
-if [ ${#need[@]} -gt 0 ]; then
-  if [ "$(id -u)" -eq 0 ]; then sudo=(); elif command -v sudo >/dev/null; then sudo=(sudo); else
-    fail "missing Debian packages: ${need[*]}; not root and no sudo: apt-get install ${need[*]}"
-  fi
-  echo "peers: installing ${need[*]}" >&2
-  export DEBIAN_FRONTEND=noninteractive
-  apt_install=("${sudo[@]}" apt-get install -y -qq --no-install-recommends -o DPkg::Lock::Timeout=600)
-  "${apt_install[@]}" "${need[@]}" >/dev/null ||
-    { "${sudo[@]}" apt-get update -qq -o DPkg::Lock::Timeout=600 && "${apt_install[@]}" "${need[@]}" >/dev/null; } ||
-    fail "apt-get could not install ${need[*]}"
-fi
+install_peers
 
 # --- embree_frame, in a build folder of its own ----------------------------------------------
 
-bin_dir="$root/build-peers"
-exe="$bin_dir/embree_frame"
-if pkg-config --exists embree3 2>/dev/null; then
-  embree_flags=($(pkg-config --cflags --libs embree3))
-  embree_how="pkg-config embree3"
-else
-  # Debian's libembree-dev ships CMake files but no embree3.pc: headers and library by path.
-  [ -f /usr/include/embree3/rtcore.h ] || fail "no embree3 headers (/usr/include/embree3/rtcore.h) and no pkg-config embree3"
-  embree_flags=(-lembree3)
-  embree_how="-lembree3 (libembree-dev has no embree3.pc)"
-fi
-if [ ! -x "$exe" ] || [ "$here/embree_frame.cpp" -nt "$exe" ]; then
-  mkdir -p "$bin_dir"
-  echo "peers: compiling $exe (g++ -O3, Embree by $embree_how)" >&2
-  g++ -std=c++17 -O3 -Wall -Wextra -o "$exe.partial" "$here/embree_frame.cpp" "${embree_flags[@]}" -pthread
-  mv "$exe.partial" "$exe"
-fi
+build_embree_frame
 
 # --- data: one raw file, one store of it ------------------------------------------------------
 
@@ -183,7 +132,7 @@ vtk_args=()
 box="$("$py" -c 'import json,sys; s=json.load(open(sys.argv[1])); o=s["origin"]; h=[o[a]+s["spacing"][a]*(s["dims"][a]-1) for a in range(3)]; print(",".join(repr(float(v)) for v in o+h))' "$raw.json")"
 "$exe" --mesh "$out/surface.bymesh" --box "$box" "${cam[@]}" --width "$width" --height "$height" \
   --threads "$threads" --frames "$frames" --quality "$embree_quality" --depth "$out/embree-depth.f32" --json "$out/embree.json" >/dev/null
-echo "peers: embree: $("$py" -c 'import json,sys; e=json.load(open(sys.argv[1])); print("build %.2f ms, first frame %.2f ms, steady %.2f ms" % (e["build_ms"], e["first_frame_ms"], e["steady_frame_ms"]))' "$out/embree.json")" >&2
+echo "peers: embree: $(embree_summary "$py" "$out/embree.json")" >&2
 
 # --- 3. brickyard ---------------------------------------------------------------------------------
 

@@ -1,24 +1,26 @@
 #!/usr/bin/env bash
-# bench/peers/peers.sh refuses bad arguments with exit status 2 and a message naming the
-# option, before it installs, compiles or generates anything; --help exits 0. Needs neither
-# VTK nor Embree: every case here stops at argument checking.
+# bench/peers/peers.sh (grids) and bench/peers/tets.sh (tetrahedral meshes) refuse bad
+# arguments with exit status 2 and a message naming the option, before they install, compile
+# or generate anything; --help exits 0. Needs neither VTK nor Embree: every case here stops at
+# argument checking.
 #   peers_args.sh SOURCE_DIR BRICKYARD_EXE
 set -uo pipefail
 peers="$1/bench/peers/peers.sh" by="$2"
 failures=0
 
-expect() {  # expect STATUS PATTERN ARGS...
+expect() {  # expect STATUS PATTERN ARGS...: runs $peers
   local status=$1 pattern=$2
   shift 2
-  local out rc
+  local out rc name
+  name="$(basename "$peers")"
   out=$("$peers" "$@" 2>&1)
   rc=$?
   if [ "$rc" -ne "$status" ] || ! grep -q -- "$pattern" <<<"$out"; then
-    echo "FAIL: peers.sh $*: exit $rc (expected $status), output:"
+    echo "FAIL: $name $*: exit $rc (expected $status), output:"
     echo "$out" | sed 's/^/    /'
     failures=$((failures + 1))
   else
-    echo "ok: peers.sh $* -> $rc: $(head -1 <<<"$out")"
+    echo "ok: $name $* -> $rc: $(head -1 <<<"$out")"
   fi
 }
 
@@ -33,5 +35,21 @@ expect 2 "--embree-quality: 'best' is not low, medium or high" --embree-quality 
 expect 2 "no back end 'no-such-backend' (it has: .*raymarch" --brickyard "$by" --backend no-such-backend
 expect 2 "no field 'no-such-field' (it has: .*marschner-lobb" --brickyard "$by" --backend raymarch --field no-such-field
 expect 1 "no brickyard executable" --brickyard /nonexistent/brickyard --backend raymarch
+
+peers="$1/bench/peers/tets.sh"
+expect 0 "usage: bench/peers/tets.sh" --help
+expect 2 "--cells: 'abc' is not an integer" --cells abc
+expect 2 "--jitter: '0.5' is not a number in \[0, 0.2\]" --jitter 0.5
+expect 2 "--vtk-merge: '2' is not 0 or 1" --vtk-merge 2
+expect 2 "unknown argument '--size'" --size 64
+expect 2 "write '--iso 0.1', not '--iso=0.1'" --iso=0.1
+expect 2 "--frames: '1' is not an integer in \[2, 1000\]" --frames 1
+expect 2 "--mesh: /nonexistent.vtu: no such file" --mesh /nonexistent.vtu
+expect 2 "--cells and --jitter are for a procedural mesh" --mesh /nonexistent.vtu --cells 8
+expect 2 "neither mesh:FIELD nor a mesh file" --mesh volume.raw
+expect 2 "no back end 'no-such-backend' (it has: .*tet_bvh" --brickyard "$by" --backend no-such-backend
+expect 2 "'raymarch' does not render tetrahedral meshes" --brickyard "$by" --backend raymarch
+expect 2 "no field 'no-such-field' (it has: .*sphere" --brickyard "$by" --mesh mesh:no-such-field
+expect 1 "no brickyard executable" --brickyard /nonexistent/brickyard
 
 [ "$failures" -eq 0 ] && echo "all cases passed" || { echo "$failures case(s) failed"; exit 1; }
