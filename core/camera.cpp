@@ -28,6 +28,25 @@ ImageRays::ImageRays(const Camera& camera, int width, int height)
   camera.basis(forward_, right_, up_);
 }
 
+void ImageRays::directions(int x0, int y0, int w, int h, double* dx, double* dy, double* dz) const {
+  const double kx = 2.0 * tan_half_fov_ * aspect_ / width_, ky = 2.0 * tan_half_fov_ / height_;
+  for (int j = 0; j < h; ++j) {
+    const Vec3d vertical = up_ * (tan_half_fov_ - (y0 + j + 0.5) * ky);
+    double* __restrict x = dx + size_t(j) * size_t(w);
+    double* __restrict y = dy + size_t(j) * size_t(w);
+    double* __restrict z = dz + size_t(j) * size_t(w);
+    for (int i = 0; i < w; ++i) {
+      const double sx = (x0 + i + 0.5) * kx - tan_half_fov_ * aspect_;
+      x[i] = forward_.x + right_.x * sx + vertical.x, y[i] = forward_.y + right_.y * sx + vertical.y,
+      z[i] = forward_.z + right_.z * sx + vertical.z;
+    }
+    for (int i = 0; i < w; ++i) {
+      const double inverse = 1.0 / std::sqrt(x[i] * x[i] + y[i] * y[i] + z[i] * z[i]);
+      x[i] *= inverse, y[i] *= inverse, z[i] *= inverse;
+    }
+  }
+}
+
 double Camera::projected_pixels(double size, double distance, int height) const {
   const double pixel_angle = 2.0 * std::tan(fov_degrees * kPi / 360.0) / height;
   return size / (std::max(distance, 1e-12) * pixel_angle);

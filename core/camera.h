@@ -41,6 +41,20 @@ class ImageRays {
     const double sy = (1.0 - 2.0 * py / height_) * tan_half_fov_;
     return {eye_, normalize(forward_ + right_ * sx + up_ * sy)};
   }
+  /// @brief The directions ray() gives (to rounding) for the pixel centres (x0 + i + 0.5,
+  /// y0 + j + 0.5), i < w, j < h, row by row into dx, dy, dz (w * h each), many at once.
+  void directions(int x0, int y0, int w, int h, double* dx, double* dy, double* dz) const;
+  /// @brief The pixel coordinates (px, py) whose ray passes through p, the inverse of ray();
+  /// false when p is not in front of the eye. A segment in front of the eye projects to the
+  /// segment between its ends' pixels, so a convex set's pixels lie in its corners' hull.
+  bool pixel_of(const Vec3d& p, double& px, double& py) const {
+    const Vec3d q = p - eye_;
+    const double z = dot(q, forward_);
+    if (!(z > 0)) return false;
+    px = (dot(q, right_) / (z * tan_half_fov_ * aspect_) + 1.0) * 0.5 * width_;
+    py = (1.0 - dot(q, up_) / (z * tan_half_fov_)) * 0.5 * height_;
+    return true;
+  }
 
  private:
   Vec3d eye_, forward_, right_, up_;

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -59,25 +60,27 @@ struct Isopolygon {
   Vec3d edge_normal[4];     ///< s_e * cross(a - o, b - o): inside where dot(., d) >= 0
 };
 
-/// Extracts the isopolygon of tet t for `iso`; false when it has none (or is seen edge-on
-/// from o).
-bool extract(const TetClusterPage& page, uint32_t t, uint32_t step, double iso, const Vec3d& o, Isopolygon& poly) {
-  const TetGeometry tet(page, t, step);
+/// The isopolygon's vertices in tet `tet` for `iso`, in cyclic order: how many (3 or 4; 0 when
+/// the isosurface misses the tet). Each comes from its edge's ends in canonical order, so the
+/// tets that share an edge put the vertex at the same place, to the bit.
+int isopolygon_vertices(const TetGeometry& tet, double iso, Vec3d* v) {
   const Vec3d* p = tet.p;
   const double* f = tet.f;
   int mask = 0;
   for (int k = 0; k < 4; ++k) mask |= int(f[k] > iso) << k;
   const int n = kCases.count[mask];
-  if (n == 0) return false;
-  // The vertices on their edges, each from its edge's ends in canonical order: the tets that
-  // share an edge put the vertex at the same place, to the bit.
-  Vec3d v[4];
   for (int k = 0; k < n; ++k) {
     int a = CaseTable::kEdges[kCases.edge[mask][k]][0], b = CaseTable::kEdges[kCases.edge[mask][k]][1];
     if (position_less(p[b], p[a])) std::swap(a, b);
     const double w = (iso - f[a]) / (f[b] - f[a]);
     v[k] = p[a] + (p[b] - p[a]) * w;
   }
+  return n;
+}
+
+/// The isopolygon of n vertices v, ready for a packet with origin o; false when it is seen
+/// edge-on from o (no ray meets its inside).
+bool isopolygon_planes(const TetGeometry& tet, const Vec3d* v, int n, const Vec3d& o, Isopolygon& poly) {
   poly.gradient = tet.gradient();
   poly.plane_offset = dot(poly.gradient, v[0] - o);
   Vec3d centre(0.0);
@@ -88,7 +91,7 @@ bool extract(const TetClusterPage& page, uint32_t t, uint32_t step, double iso, 
     if (position_less(b, a)) std::swap(a, b);
     const Vec3d m = cross(a - o, b - o);
     const double side = dot(m, centre - o);
-    if (side == 0) return false;  // seen edge-on: no ray meets its inside
+    if (side == 0) return false;
     poly.edge_normal[k] = side > 0 ? m : -m;
   }
   poly.n = n;
@@ -97,8 +100,40 @@ bool extract(const TetClusterPage& page, uint32_t t, uint32_t step, double iso, 
 
 struct Local {
   uint64_t packet_box = 0, ray_box = 0, isorange = 0, extractions = 0, ray_polygon = 0, full_miss = 0, full_hit = 0;
-  uint64_t touched = 0, missing = 0;
+  uint64_t footprint_culled = 0, footprint_culled_box = 0, touched = 0, missing = 0;
 };
+
+/// Lanes [x0, x1] x [y0, y1] of a primary packet.
+struct LaneRect {
+  int x0 = 0, x1 = -1, y0 = 0, y1 = -1;
+  bool empty() const { return x0 > x1 || y0 > y1; }
+};
+
+/// The lanes of a primary packet whose rays can meet the convex hull of `points`: the pixels
+/// its projection covers, with a pixel of margin for rounding. False when some point is not in
+/// front of the eye (then any lane may).
+bool lanes_seeing(const Packet& p, const Vec3d* points, int n, LaneRect& r) {
+  double lo_x = kInf, hi_x = -kInf, lo_y = kInf, hi_y = -kInf;
+  for (int k = 0; k < n; ++k) {
+    double px, py;
+    if (!p.image->pixel_of(points[k], px, py)) return false;
+    lo_x = std::min(lo_x, px), hi_x = std::max(hi_x, px), lo_y = std::min(lo_y, py), hi_y = std::max(hi_y, py);
+  }
+  const int h = (p.lanes + p.w - 1) / p.w;
+  // Lane (x, y) is the ray through the pixel centre (x0 + x + 0.5, y0 + y + 0.5).
+  auto first = [](double v, int size) { return int(std::ceil(std::clamp(v - 1.5, -1.0, double(size)))); };
+  auto last = [](double v, int size) { return int(std::floor(std::clamp(v + 0.5, -1.0, double(size)))); };
+  r.x0 = std::max(0, first(lo_x - p.x0, p.w)), r.x1 = std::min(p.w - 1, last(hi_x - p.x0, p.w));
+  r.y0 = std::max(0, first(lo_y - p.y0, h)), r.y1 = std::min(h - 1, last(hi_y - p.y0, h));
+  return true;
+}
+
+bool lanes_seeing(const Packet& p, const BvhNode& n, LaneRect& r) {
+  Vec3d corners[8];
+  for (int k = 0; k < 8; ++k)
+    corners[k] = Vec3d(k & 1 ? n.hi[0] : n.lo[0], k & 2 ? n.hi[1] : n.lo[1], k & 4 ? n.hi[2] : n.lo[2]);
+  return lanes_seeing(p, corners, 8, r);
+}
 
 /// Where ray l enters a box within its span (infinity when it misses it).
 double ray_box_entry(const Packet& p, int l, const BvhNode& n) {
@@ -145,8 +180,10 @@ thread_local uint32_t TetBvhRenderer::current_tile = 0;
 void Packet::prepare() {
   for (int a = 0; a < 3; ++a) dlo[a] = kInf, dhi[a] = -kInf;
   t_lo = kInf, t_hi = -kInf;
+  for (int l = 0; l < lanes; ++l) ix[l] = 1.0 / dx[l];
+  for (int l = 0; l < lanes; ++l) iy[l] = 1.0 / dy[l];
+  for (int l = 0; l < lanes; ++l) iz[l] = 1.0 / dz[l];
   for (int l = 0; l < lanes; ++l) {
-    ix[l] = 1.0 / dx[l], iy[l] = 1.0 / dy[l], iz[l] = 1.0 / dz[l];
     if (!active[l]) continue;
     const double d[3] = {dx[l], dy[l], dz[l]};
     for (int a = 0; a < 3; ++a) dlo[a] = std::min(dlo[a], d[a]), dhi[a] = std::max(dhi[a], d[a]);
@@ -157,14 +194,68 @@ void Packet::prepare() {
 void TetBvhRenderer::leaf(Packet& p, const TetClusterPage& page, const ClusterBvh& bvh, const BvhNode& node, int first) const {
   Local c;
   Isopolygon poly;
+  bool hits = false;
   for (uint32_t s = node.index; s < node.index + node.count; ++s) {
     const float lo = bvh.tet_range[2 * size_t(s)], hi = bvh.tet_range[2 * size_t(s) + 1];
     const uint32_t t = bvh.bvh.order[s];
+    std::optional<TetGeometry> tet;
     for (size_t k = 0; k < iso_.size(); ++k) {
       ++c.isorange;
       if (!(iso_[k] >= lo && iso_[k] <= hi)) continue;
       ++c.extractions;
-      if (!extract(page, t, step_, iso_[k], p.origin, poly)) continue;
+      if (!tet) tet.emplace(page, t, step_);
+      Vec3d v[4];
+      const int n = isopolygon_vertices(*tet, iso_[k], v);
+      if (n == 0) continue;
+      // A primary packet tests only the lanes whose pixels the polygon's projection covers
+      // (a few of the 256: at a million tets a polygon covers some ten pixels), and none
+      // when no lane there is still active.
+      LaneRect r;
+      const bool footprint = p.image && lanes_seeing(p, v, n, r);
+      if (footprint) {
+        bool any = false;
+        for (int y = r.y0; y <= r.y1 && !any; ++y)
+          for (int x = r.x0; x <= r.x1 && !any; ++x) {
+            const int l = y * p.w + x;
+            any = l >= first && l < p.lanes && p.active[l];
+          }
+        if (!any) {
+          c.footprint_culled += uint64_t(p.lanes - first);
+          continue;
+        }
+      }
+      if (!isopolygon_planes(*tet, v, n, p.origin, poly)) continue;
+      auto test_lane = [&](int l, bool all_inside) {
+        if (!p.active[l]) return;
+        ++c.ray_polygon;
+        const Vec3d d = p.dir(l);
+        if (!all_inside) {  // the edges first: most lanes a footprint holds miss the polygon
+          for (int e = 0; e < poly.n; ++e)
+            if (!(dot(poly.edge_normal[e], d) >= 0)) return;
+        }
+        const double den = dot(poly.gradient, d);
+        if (den == 0) return;
+        const double th = poly.plane_offset / den;
+        if (!(th >= p.tmin[l] && th <= p.tmax[l])) return;
+        if (th > p.hit_t[l] || (th == p.hit_t[l] && int(k) >= p.hit_surface[l])) return;
+        p.hit_t[l] = th;
+        p.hit_surface[l] = int(k);
+        p.gx[l] = poly.gradient.x, p.gy[l] = poly.gradient.y, p.gz[l] = poly.gradient.z;
+        if (p.any_hit) p.active[l] = false;
+        hits = true;
+      };
+      if (footprint) {
+        uint64_t tested = 0;
+        for (int y = r.y0; y <= r.y1; ++y)
+          for (int x = r.x0; x <= r.x1; ++x) {
+            const int l = y * p.w + x;
+            if (l < first || l >= p.lanes) continue;
+            ++tested;
+            test_lane(l, false);
+          }
+        c.footprint_culled += uint64_t(p.lanes - first) - tested;
+        continue;
+      }
       // The four corner rays: a packet wholly outside one edge misses; wholly inside every
       // edge, every ray is inside.
       bool all_inside = false;
@@ -183,35 +274,57 @@ void TetBvhRenderer::leaf(Packet& p, const TetClusterPage& page, const ClusterBv
         }
         if (all_inside) c.full_hit += uint64_t(p.lanes - first);
       }
-      for (int l = first; l < p.lanes; ++l) {
-        if (!p.active[l]) continue;
-        ++c.ray_polygon;
-        const Vec3d d = p.dir(l);
-        const double den = dot(poly.gradient, d);
-        if (den == 0) continue;
-        const double th = poly.plane_offset / den;
-        if (!(th >= p.tmin[l] && th <= p.tmax[l])) continue;
-        if (th > p.hit_t[l] || (th == p.hit_t[l] && int(k) >= p.hit_surface[l])) continue;
-        if (!all_inside) {
-          bool inside = true;
-          for (int e = 0; e < poly.n && inside; ++e) inside = dot(poly.edge_normal[e], d) >= 0;
-          if (!inside) continue;
-        }
-        p.hit_t[l] = th;
-        p.hit_surface[l] = int(k);
-        p.gx[l] = poly.gradient.x, p.gy[l] = poly.gradient.y, p.gz[l] = poly.gradient.z;
-        if (p.any_hit) p.active[l] = false;
-      }
+      for (int l = first; l < p.lanes; ++l) test_lane(l, all_inside);
     }
+  }
+  // The frustum's far bound shrinks with the hits: boxes behind every ray's hit are culled
+  // whole (they still project onto the packet).
+  if (hits) {
+    p.t_hi = -kInf;
+    for (int l = 0; l < p.lanes; ++l)
+      if (p.active[l]) p.t_hi = std::max(p.t_hi, p.limit(l));
   }
   counters_.isorange_tests.fetch_add(c.isorange, std::memory_order_relaxed);
   counters_.extractions.fetch_add(c.extractions, std::memory_order_relaxed);
   counters_.ray_polygon_tests.fetch_add(c.ray_polygon, std::memory_order_relaxed);
   counters_.full_miss_rays.fetch_add(c.full_miss, std::memory_order_relaxed);
   counters_.full_hit_rays.fetch_add(c.full_hit, std::memory_order_relaxed);
+  counters_.footprint_culled_rays.fetch_add(c.footprint_culled, std::memory_order_relaxed);
 }
 
 namespace {
+
+/// The first lane after `first` whose ray meets box n (p.lanes when none): a primary packet
+/// searches the lanes the box's projection covers (none: the packet misses it); others test
+/// the packet's frustum, then each ray in turn.
+int next_hit(const Packet& p, const BvhNode& n, int first, Local& c) {
+  if (p.lanes == 1) return p.lanes;
+  ++c.packet_box;
+  if (frustum_misses(p, n)) return p.lanes;
+  LaneRect r;
+  if (p.image && lanes_seeing(p, n, r)) {
+    uint64_t tested = 0;
+    for (int y = r.y0; y <= r.y1; ++y)
+      for (int x = std::max(r.x0, y * p.w > first ? r.x0 : first + 1 - y * p.w); x <= r.x1; ++x) {
+        const int l = y * p.w + x;
+        if (l >= p.lanes) break;
+        if (!p.active[l]) continue;
+        ++c.ray_box, ++tested;
+        if (ray_hits_box(p, l, n)) {
+          c.footprint_culled_box += uint64_t(l - first) - tested;
+          return l;
+        }
+      }
+    c.footprint_culled_box += uint64_t(p.lanes - first - 1) - tested;
+    return p.lanes;
+  }
+  for (int next = first + 1; next < p.lanes; ++next) {
+    if (!p.active[next]) continue;
+    ++c.ray_box;
+    if (ray_hits_box(p, next, n)) return next;
+  }
+  return p.lanes;
+}
 
 /// The packet's walk of one BVH: implicit test, speculative first-active box test, frustum,
 /// then the next ray that hits; `at_leaf(node, first)` for leaves. Near child first.
@@ -234,18 +347,8 @@ void walk(const BoxBvh& bvh, Packet& p, const std::vector<double>& iso, int firs
     if (first >= p.lanes) continue;
     ++c.ray_box;
     if (!ray_hits_box(p, first, n)) {
-      if (p.lanes > 1) {
-        ++c.packet_box;
-        if (frustum_misses(p, n)) continue;
-      }
-      int next = first + 1;
-      for (; next < p.lanes; ++next) {
-        if (!p.active[next]) continue;
-        ++c.ray_box;
-        if (ray_hits_box(p, next, n)) break;
-      }
-      if (next >= p.lanes) continue;
-      first = next;
+      first = next_hit(p, n, first, c);
+      if (first >= p.lanes) continue;
     }
     if (n.leaf()) {
       at_leaf(n, first);
@@ -271,6 +374,7 @@ void TetBvhRenderer::trace_cluster(Packet& p, const TetClusterPage& page, const 
   counters.nodes += c.ray_box;
   counters_.packet_box_tests.fetch_add(c.packet_box, std::memory_order_relaxed);
   counters_.ray_box_tests.fetch_add(c.ray_box, std::memory_order_relaxed);
+  counters_.footprint_culled_box_rays.fetch_add(c.footprint_culled_box, std::memory_order_relaxed);
 }
 
 uint64_t TetBvhRenderer::trace(Packet& p, RayCounters& counters) const {
@@ -312,6 +416,7 @@ uint64_t TetBvhRenderer::trace(Packet& p, RayCounters& counters) const {
   counters.nodes += c.ray_box;
   counters_.packet_box_tests.fetch_add(c.packet_box, std::memory_order_relaxed);
   counters_.ray_box_tests.fetch_add(c.ray_box, std::memory_order_relaxed);
+  counters_.footprint_culled_box_rays.fetch_add(c.footprint_culled_box, std::memory_order_relaxed);
   counters_.clusters_touched.fetch_add(c.touched, std::memory_order_relaxed);
   counters_.clusters_missing.fetch_add(c.missing, std::memory_order_relaxed);
   return c.missing;

@@ -58,7 +58,8 @@ const ParamTable<Params>& params_table();
 /// Per-frame figures, summed over tiles (the paper's Table 4 and the cache's side).
 struct Counters {
   std::atomic<uint64_t> packet_box_tests{0}, ray_box_tests{0}, isorange_tests{0}, extractions{0}, ray_polygon_tests{0},
-      full_miss_rays{0}, full_hit_rays{0}, clusters_touched{0}, clusters_missing{0}, bvh_builds{0}, bvh_build_ns{0}, bvh_refits{0}, bvh_refit_ns{0};
+      full_miss_rays{0}, full_hit_rays{0}, footprint_culled_rays{0}, footprint_culled_box_rays{0}, clusters_touched{0},
+      clusters_missing{0}, bvh_builds{0}, bvh_build_ns{0}, bvh_refits{0}, bvh_refit_ns{0};
   void reset();
 };
 
@@ -82,6 +83,10 @@ struct Packet {
   bool active[kMaxLanes];
   bool any_hit = false;      ///< shadow rays: a lane stops at its first hit
   int corners[4] = {-1, -1, -1, -1};  ///< lanes of the packet's corner rays (-1: no corner culling)
+  // Primary packets: lane l is the ray through pixel (x0 + l % w, y0 + l / w) of `image`, so
+  // the lanes that can see a box or a polygon are the pixels its projection covers.
+  const ImageRays* image = nullptr;
+  int x0 = 0, y0 = 0, w = 0;
   // Frustum: the direction's bounds over the active lanes.
   double dlo[3], dhi[3];
   double t_lo = 0, t_hi = 0;  ///< bounds of tmin and of min(tmax, hit_t) over the active lanes

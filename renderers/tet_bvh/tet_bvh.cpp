@@ -45,8 +45,8 @@ const ParamTable<Params>& params_table() {
 
 void Counters::reset() {
   for (auto* c : {&packet_box_tests, &ray_box_tests, &isorange_tests, &extractions, &ray_polygon_tests, &full_miss_rays,
-                  &full_hit_rays, &clusters_touched, &clusters_missing, &bvh_builds, &bvh_build_ns, &bvh_refits,
-                  &bvh_refit_ns})
+                  &full_hit_rays, &footprint_culled_rays, &footprint_culled_box_rays, &clusters_touched, &clusters_missing,
+                  &bvh_builds, &bvh_build_ns, &bvh_refits, &bvh_refit_ns})
     c->store(0, std::memory_order_relaxed);
 }
 
@@ -232,6 +232,8 @@ void TetBvhRenderer::add_statistics(FrameStats& stats) const {
                    {"ray_isopolygon_tests", v(counters_.ray_polygon_tests)},
                    {"full_miss_rays_culled", v(counters_.full_miss_rays)},
                    {"full_hit_rays", v(counters_.full_hit_rays)},
+                   {"footprint_culled_rays", v(counters_.footprint_culled_rays)},
+                   {"footprint_culled_box_rays", v(counters_.footprint_culled_box_rays)},
                    {"clusters_touched", v(counters_.clusters_touched)},
                    {"clusters_missing", v(counters_.clusters_missing)},
                    {"bvh_builds", v(counters_.bvh_builds)},
@@ -250,18 +252,31 @@ bool TetBvhRenderer::render_packet(const FrameSetup& setup, const ImageRays& ray
   const int w = x1 - x0;
   p.lanes = w * (y1 - y0);
   p.origin = setup.camera.eye;
+  p.image = &rays, p.x0 = x0, p.y0 = y0, p.w = w;
+  rays.directions(x0, y0, w, y1 - y0, p.dx, p.dy, p.dz);
+  // The clip box's span per ray, as intersect() computes it, over whole arrays.
+  double t0[kMaxLanes], t1[kMaxLanes];
+  for (int l = 0; l < p.lanes; ++l) t0[l] = 0, t1[l] = kInf;
+  const double* dirs[3] = {p.dx, p.dy, p.dz};
+  for (int a = 0; a < 3; ++a) {
+    const double lo = clip_.lo[a] - p.origin[a], hi = clip_.hi[a] - p.origin[a];
+    const double* d = dirs[a];
+    for (int l = 0; l < p.lanes; ++l) {
+      const double inv = 1.0 / d[l];
+      double tn = lo * inv, tf = hi * inv;
+      if (tn > tf) std::swap(tn, tf);
+      if (tn > t0[l]) t0[l] = tn;  // NaN (a parallel ray in the slab's plane) leaves it unchanged
+      if (tf < t1[l]) t1[l] = tf;
+    }
+  }
   int px[kMaxLanes], py[kMaxLanes];
   bool any = false;
   for (int l = 0; l < p.lanes; ++l) {
     px[l] = x0 + l % w, py[l] = y0 + l / w;
-    const Rayd r = rays.ray(px[l] + 0.5, py[l] + 0.5);
-    p.dx[l] = r.dir.x, p.dy[l] = r.dir.y, p.dz[l] = r.dir.z;
     const size_t pix = size_t(py[l]) * size_t(setup.width) + size_t(px[l]);
-    Interval<double> span = intersect(r, clip_);
-    span.t0 = std::max(span.t0, 0.0);
-    p.active[l] = !pixel_done_[pix] && !span.empty() && std::isfinite(span.t1);
-    p.tmin[l] = resume_t_[pix] >= 0 ? resume_t_[pix] : span.t0;
-    p.tmax[l] = span.t1;
+    p.active[l] = !pixel_done_[pix] && t0[l] <= t1[l] && std::isfinite(t1[l]);
+    p.tmin[l] = resume_t_[pix] >= 0 ? resume_t_[pix] : t0[l];
+    p.tmax[l] = t1[l];
     if (!pixel_done_[pix]) ++counters.rays;
     if (!pixel_done_[pix] && !p.active[l]) {  // outside the volume: background, done
       PixelResult bg;

@@ -135,3 +135,39 @@ TEST(Camera, InBoxMapsNormalisedCoordinatesAndKeepsFlatAxesApart) {
 
 }  // namespace
 }  // namespace brickyard
+
+namespace brickyard {
+namespace {
+
+TEST(ImageRays, PixelOfInvertsRayAndDirectionsMatchRay) {
+  Camera cam;
+  cam.eye = {2.0, -1.5, 1.2};
+  cam.target = {0.4, 0.6, 0.5};
+  cam.up = {0, 0, 1};
+  cam.fov_degrees = 37;
+  const ImageRays rays(cam, 96, 64);
+  for (double px : {0.25, 10.5, 47.0, 95.75})
+    for (double py : {0.5, 31.25, 63.5}) {
+      const Rayd r = rays.ray(px, py);
+      double qx = 0, qy = 0;
+      ASSERT_TRUE(rays.pixel_of(r.org + r.dir * 3.7, qx, qy));
+      EXPECT_NEAR(qx, px, 1e-9);
+      EXPECT_NEAR(qy, py, 1e-9);
+      EXPECT_FALSE(rays.pixel_of(r.org - r.dir * 0.5, qx, qy)) << "behind the eye";
+    }
+  double ex = 0, ey = 0;
+  EXPECT_FALSE(rays.pixel_of(cam.eye, ex, ey)) << "the eye itself";
+  double dx[12 * 5], dy[12 * 5], dz[12 * 5];
+  rays.directions(40, 20, 12, 5, dx, dy, dz);
+  for (int j = 0; j < 5; ++j)
+    for (int i = 0; i < 12; ++i) {
+      const Vec3d d = rays.ray(40 + i + 0.5, 20 + j + 0.5).dir;
+      const size_t l = size_t(j * 12 + i);
+      EXPECT_NEAR(dx[l], d.x, 1e-14);
+      EXPECT_NEAR(dy[l], d.y, 1e-14);
+      EXPECT_NEAR(dz[l], d.z, 1e-14);
+    }
+}
+
+}  // namespace
+}  // namespace brickyard

@@ -101,6 +101,17 @@ TEST_F(TetBvh, PacketsOfEverySizeAndSingleRaysGiveIdenticalHits) {
     EXPECT_EQ(differing_pixels(single, bvh_frame(sphere(), {{"packet", double(packet)}})), 0) << packet;
   }
   EXPECT_EQ(differing_pixels(single, bvh_frame(sphere(), {{"corner_culling", 0}})), 0);
+  // An eye inside the mesh: polygons and boxes beside and behind it project nowhere, and the
+  // packets fall back to testing their rays.
+  const std::string inside = std::string(R"("mode": "iso", "isosurfaces": [{"value": 0.2}, {"value": 0.35}],
+      "camera": {"eye": [0.45, 0.5, 0.55], "target": [0.9, 0.6, 0.4], "up": [0, 0, 1], "fov_degrees": 100})");
+  const FrameBuffers near_single = bvh_frame(sphere(inside), {{"packet", 1}});
+  const FrameBuffers near_packets = bvh_frame(sphere(inside));
+  EXPECT_EQ(differing_pixels(near_single, near_packets), 0);
+  int hits = 0;
+  for (int y = 0; y < near_packets.height(); ++y)
+    for (int x = 0; x < near_packets.width(); ++x) hits += std::isfinite(near_packets.depth(x, y));
+  EXPECT_EQ(hits, near_packets.width() * near_packets.height()) << "an eye inside the 0.35 shell sees it everywhere";
 }
 
 TEST_F(TetBvh, SahAndSpatialMedianBuildsGiveIdenticalImages) {
