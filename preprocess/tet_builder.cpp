@@ -149,8 +149,12 @@ class ProceduralMesh final : public TetClusterSource {
     if (!(std::abs(spec.move) <= 1))
       throw Error(Errc::invalid_argument, fmt::format("move {} (need -1 to 1: a fraction of the domain per step)", spec.move))
           .with_field("--move");
-    block_ = std::clamp<int64_t>(int64_t(std::cbrt(double(std::max<uint32_t>(6, cluster_tets)) / 6.0)), 1, spec.cells);
-    blocks_ = (spec.cells + block_ - 1) / block_;
+    // Blocks of equal size (24 cells in blocks of at most 11: 3 of 8, not 11, 11 and 2): pages
+    // take fixed slots of the largest cluster's size, so a sliver would waste most of its slot.
+    const int64_t largest =
+        std::clamp<int64_t>(int64_t(std::cbrt(double(std::max<uint32_t>(6, cluster_tets)) / 6.0)), 1, spec.cells);
+    blocks_ = (spec.cells + largest - 1) / largest;
+    block_ = (spec.cells + blocks_ - 1) / blocks_;
     domain_ = field_->domain();
     cell_ = domain_.extent() / double(spec.cells);
     const uint64_t cubes = uint64_t(spec.cells) * uint64_t(spec.cells) * uint64_t(spec.cells) * replicas();

@@ -338,6 +338,21 @@ TEST(TetStore, AProceduralMeshWithMovingVerticesShearsItInEveryStep) {
   EXPECT_FALSE(std::filesystem::exists(dir.file("folded.store") + "/manifest.json"));
 }
 
+TEST(TetStore, AProceduralMeshIsCutIntoBlocksOfEqualSize) {
+  // Pages take fixed cache slots of the largest cluster's size: 24 cells in blocks of at most
+  // 11 are three blocks of 8, not 11, 11 and a sliver of 2.
+  ProceduralMeshSpec spec;
+  spec.field = "sphere";
+  spec.cells = 24;
+  auto source = make_procedural_mesh(spec, 8192);
+  ASSERT_EQ(source->cluster_count(), 27u);
+  ClusterData d;
+  for (uint64_t c = 0; c < source->cluster_count(); ++c) {
+    source->cluster(c, d);
+    EXPECT_EQ(d.corners.size(), size_t(8 * 8 * 8 * 6 * 4)) << c;
+  }
+}
+
 TEST(TetStore, AnInterruptedBuildLeavesNoCompleteStore) {
   testing::TempDir dir;
   class Failing final : public TetClusterSource {
