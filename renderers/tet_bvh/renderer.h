@@ -35,6 +35,7 @@
 
 #include "renderers/common/params.h"
 #include "renderers/common/pixel.h"
+#include "renderers/common/render.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
 #include "renderers/tet_bvh/bvh.h"
@@ -165,6 +166,11 @@ class TetBvhRenderer final : public Renderer {
   // pixel whether it is finished and from where an exact pass resumes its ray.
   mutable std::vector<uint8_t> tile_missed_, pixel_done_;
   mutable std::vector<double> resume_t_;
+  /// Where pixel (x, y)'s state lies: tile by tile, so that a packet's is contiguous.
+  size_t pixel_slot(int x, int y) const {
+    const size_t tile = size_t(y / kTileSize) * size_t(tiles_x_) + size_t(x / kTileSize);
+    return tile * size_t(kTileSize * kTileSize) + size_t(y % kTileSize) * kTileSize + size_t(x % kTileSize);
+  }
   mutable std::atomic<uint64_t> unfinished_{0};
   // Exact frames: the clusters a pass found missing, with the highest priority asked, and
   // the first tile (in tile order) that missed each.

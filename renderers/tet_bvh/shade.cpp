@@ -141,12 +141,14 @@ bool TetBvhRenderer::shade_packet(const FrameSetup& setup, Packet& p, const int*
   bool complete = true;
   for (int l = 0; l < p.lanes; ++l) {
     if (!traced[l]) continue;
-    const size_t pix = size_t(py[l]) * size_t(setup.width) + size_t(px[l]);
+    const size_t pix = pixel_slot(px[l], py[l]);
     if (unfinished[l]) {
       complete = false;
       unfinished_.fetch_add(1, std::memory_order_relaxed);
       if (frame_exact_) {
+        pixel_done_[pix] = 0;
         if (layers == 1 && resume[l] >= 0) resume_t_[pix] = resume[l];
+        else if (passes_ == 0) resume_t_[pix] = -1;  // from the start of its span
         continue;  // drawn when it is finished
       }
     }

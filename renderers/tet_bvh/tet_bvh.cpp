@@ -31,8 +31,9 @@ const ParamTable<Params>& params_table() {
       {"max_passes", &Params::max_passes, 256, 1, 100000, "exact frames: passes at most"},
       {"layers", &Params::layers, 1, 1, 16, "transparent depth peeling: surface layers composited along each ray; 1: opaque"},
       {"layer_opacity", &Params::layer_opacity, 0.5, 0.01, 1.0, "layers > 1: the opacity of each layer"},
-      {"bvh_cache", &Params::bvh_cache_mib, 256, 1, 1 << 20,
-       "MiB of cluster BVHs kept beside the cache (the least recently used are dropped, and rebuilt when needed)"},
+      {"bvh_cache", &Params::bvh_cache_mib, 0, 0, 1 << 20,
+       "MiB of cluster BVHs kept beside the cache (the least recently used are dropped, and rebuilt when needed); 0: "
+       "one and a half times the L1 budget, room for the BVHs of every cluster L1 holds"},
       {"bvh_per_step", &Params::bvh_per_step, 0, 0, 1,
        "time-varying meshes: 1: a cluster BVH built for each time step drawn (kept while the BVH cache holds them); 0: one "
        "BVH per cluster, refitted when the step changes (moved vertices, new values)"},
@@ -54,7 +55,10 @@ TetBvhRenderer::TetBvhRenderer(const RenderContext& ctx, const Params& p)
     : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), tets_(ctx.tets()), p_(p), shading_(scene_.shading, geo_) {
   for (const Isosurface& s : scene_.isosurfaces) iso_.push_back(s.value);
   clip_ = Box3d(geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi));
-  bvh_budget_ = size_t(p_.bvh_cache_mib * double(1 << 20));
+  // A BVH takes about as many bytes as its cluster's page (40-byte nodes, a slot and a range
+  // per tet): evicting the BVH of a cluster still in L1 would rebuild it every frame.
+  const size_t l1_bytes = ctx_.pages().pool_slots(RecordKind::tet_cluster) * tets_.page_bytes();
+  bvh_budget_ = p_.bvh_cache_mib > 0 ? size_t(p_.bvh_cache_mib * double(1 << 20)) : l1_bytes + l1_bytes / 2;
 }
 
 void TetBvhRenderer::set_step(uint32_t step) {
@@ -144,8 +148,10 @@ void TetBvhRenderer::begin_frame(const FrameSetup& setup) {
   const size_t tiles = size_t(tiles_x_) * size_t((setup.height + kTileSize - 1) / kTileSize);
   tile_done_.assign(tiles, 0);
   tile_missed_.assign(tiles, 0);
-  resume_t_.assign(size_t(setup.width) * size_t(setup.height), -1.0);
-  pixel_done_.assign(resume_t_.size(), 0);
+  // Tile-major per-pixel state, written by every pixel in the first pass (so never cleared);
+  // the slots of edge tiles past the image stay done.
+  const size_t slots = tiles * size_t(kTileSize * kTileSize);
+  if (pixel_done_.size() != slots) pixel_done_.assign(slots, 1), resume_t_.assign(slots, -1.0);
   unfinished_.store(0, std::memory_order_relaxed);
   missing_.clear();
   focus_tile_ = UINT32_MAX;
@@ -271,14 +277,16 @@ bool TetBvhRenderer::render_packet(const FrameSetup& setup, const ImageRays& ray
   }
   int px[kMaxLanes], py[kMaxLanes];
   bool any = false;
+  const bool first_pass = passes_ == 0;  // nothing done or resumed yet: no state to read
   for (int l = 0; l < p.lanes; ++l) {
     px[l] = x0 + l % w, py[l] = y0 + l / w;
-    const size_t pix = size_t(py[l]) * size_t(setup.width) + size_t(px[l]);
-    p.active[l] = !pixel_done_[pix] && t0[l] <= t1[l] && std::isfinite(t1[l]);
-    p.tmin[l] = resume_t_[pix] >= 0 ? resume_t_[pix] : t0[l];
+    const size_t pix = pixel_slot(px[l], py[l]);
+    const bool done = !first_pass && pixel_done_[pix];
+    p.active[l] = !done && t0[l] <= t1[l] && std::isfinite(t1[l]);
+    p.tmin[l] = !first_pass && resume_t_[pix] >= 0 ? resume_t_[pix] : t0[l];
     p.tmax[l] = t1[l];
-    if (!pixel_done_[pix]) ++counters.rays;
-    if (!pixel_done_[pix] && !p.active[l]) {  // outside the volume: background, done
+    if (!done) ++counters.rays;
+    if (!done && !p.active[l]) {  // outside the volume: background, done
       PixelResult bg;
       bg.color = scene_.background;
       write_pixel(out, px[l], py[l], bg);

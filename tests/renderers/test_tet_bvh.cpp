@@ -361,6 +361,30 @@ TEST_F(TetBvh, RefitEqualsRebuildForMovingVertices) {
   EXPECT_GT(differing_pixels(refitted[0], refitted[2]), 200);
 }
 
+TEST_F(TetBvh, TheBvhCacheKeepsTheBvhsOfWhatL1Holds) {
+  // 162k tets: some 3 MiB of BVHs. Under a 1 MiB BVH cache every frame rebuilds what it
+  // dropped; by default (1.5 x L1) a warm frame builds nothing.
+  build(lattice_mesh(30, 0.1, [](const Vec3d& p) { return length(p - Vec3d(0.5)); }), dir_.file("big.store"), 4096);
+  const Scene s = tet_scene(dir_.file("big.store"), R"("mode": "iso", "isosurfaces": [{"value": 0.3}])", 64, "tet_bvh");
+  auto warm_builds = [&](std::map<std::string, double> params) {
+    RenderSession::Options o;
+    o.backend = "tet_bvh";
+    o.params = std::move(params);
+    o.params["exact"] = 1;
+    RenderSession session(s, o);
+    FrameBuffers fb;
+    session.render(0, fb);
+    const FrameStats warm = session.render(0, fb);
+    return std::pair{warm.backend_value("bvh_builds"), warm.backend_value("bvh_bytes")};
+  };
+  const auto [default_builds, default_bytes] = warm_builds({});
+  EXPECT_EQ(default_builds, 0);
+  EXPECT_GT(default_bytes, double(1 << 20));
+  const auto [small_builds, small_bytes] = warm_builds({{"bvh_cache", 1}});
+  EXPECT_GT(small_builds, 0);
+  EXPECT_LE(small_bytes, double(1 << 20) + 200e3);  // the budget, and at most the one BVH just built
+}
+
 TEST(TetBvhTree, ARefitKeepsTheTopologyAndBoundsEveryNodesItems) {
   testing::TempDir dir;
   build(moving_sphere(3), dir.file("moving.store"), 6000);
