@@ -32,6 +32,7 @@ bool is_mesh_source(const std::string& source) { return source.rfind("mesh:", 0)
 void run_mesh_import(const MeshImportOptions& o) {
   TetBuildOptions b;
   b.cluster_tets = o.cluster_tets;
+  b.store_bvh = o.bvh;
   b.force = o.force;
   if (!o.map_size.empty()) b.map_size = parse_bytes(o.map_size, "--map-size");
   std::unique_ptr<TetClusterSource> source;
@@ -100,6 +101,12 @@ void print_mesh_info(const std::string& path, const Store& store) {
   if (!m.complete) return;
   const size_t table = store.clusters().size() * sizeof(TetCluster) + store.step_ranges().size() * sizeof(TetStepRange);
   std::cout << fmt::format("cluster table {}, {} cluster records\n", format_bytes(double(table)), store.record_count());
+  if (!m.build.empty()) {
+    const nlohmann::json build = nlohmann::json::parse(m.build);
+    if (build.contains("bvh"))
+      std::cout << fmt::format("BVHs stored with the clusters ({}, leaves of at most {} tets, step 0)\n",
+                               build["bvh"].value("method", std::string("?")), build["bvh"].value("leaf_size", 0));
+  }
   nlohmann::json source = nlohmann::json::parse(m.source);
   if (source.contains("report")) {
     const nlohmann::json& r = source["report"];

@@ -422,6 +422,10 @@ void add_store_commands(CLI::App& app, int& exit_status) {
         ->capture_default_str()
         ->group(mesh);
     cmd->add_option("--cluster-tets", o->mesh.cluster_tets, "Mesh: tets a cluster holds at most")->capture_default_str()->group(mesh);
+    cmd->add_flag("--bvh", o->mesh.bvh,
+                  "Mesh: store each cluster's BVH (tet_bvh's default build) with its page, read instead of built when "
+                  "a cluster first arrives")
+        ->group(mesh);
     auto* build = "Build";
     cmd->add_option("--brick-size", o->brick_size, "Brick interior edge M: a power of two in [8, 128]")
         ->capture_default_str()->group(build);

@@ -42,6 +42,7 @@ struct MeshImportOptions {
   double move = 0;               ///< mesh:FIELD: moving vertices (see ProceduralMeshSpec)
   std::vector<std::string> params;
   uint32_t cluster_tets = 8192;
+  bool bvh = false;              ///< --bvh: store each cluster's BVH with it
   std::string map_size;
   bool force = false;
 };

@@ -62,6 +62,8 @@ TetClusterPage TetClusterPage::view(std::span<const std::byte> page) {
   v.positions = reinterpret_cast<const float*>(p);
   v.values = v.positions + 3 * size_t(v.vertex_count) * v.position_sets;
   v.corners = reinterpret_cast<const uint32_t*>(v.values + size_t(v.vertex_count) * v.steps);
+  const size_t used = bytes(v.vertex_count, v.tet_count, v.steps, v.position_sets);
+  v.tail = page.subspan(used);
   return v;
 }
 

@@ -7,9 +7,10 @@
 /// A decoded page is, in native byte order: u32 vertex count V, u32 tet count T, u32 time
 /// steps S, u32 position sets P (1, or S for moving vertices), then P x V positions (3 floats
 /// each, world coordinates), S x V scalars (float, step-major), and T tetrahedra of 4 u32
-/// vertex indices local to the cluster, each positively oriented. Every page of a dataset is
-/// decoded into the same number of bytes (the largest cluster's); the bytes past a smaller
-/// cluster's end are zero.
+/// vertex indices local to the cluster, each positively oriented; then, in stores imported
+/// with --bvh, the cluster's BVH (dataset/tet_bvh.h). Every page of a dataset is decoded into
+/// the same number of bytes (the largest cluster's); the bytes past a smaller cluster's end
+/// are zero.
 
 #include <cstddef>
 #include <cstdint>
@@ -37,6 +38,8 @@ struct TetClusterPage {
   const float* positions = nullptr;  ///< 3 per vertex (step 0's)
   const float* values = nullptr;     ///< 1 per vertex (step 0's)
   const uint32_t* corners = nullptr; ///< 4 per tetrahedron, local vertex indices
+  /// The page's bytes after its tetrahedra: a stored BVH (dataset/tet_bvh.h), or zeros.
+  std::span<const std::byte> tail;
 
   /// @brief The positions of time step `step` (step 0's when the vertices do not move).
   const float* positions_at(uint32_t step) const {

@@ -15,6 +15,7 @@
 #include "core/parallel.h"
 #include "core/progress.h"
 #include "core/timing.h"
+#include "dataset/tet_bvh.h"
 #include "fields/random.h"
 #include "storage/page_codec.h"
 #include "storage/store.h"
@@ -297,7 +298,7 @@ struct EncodedCluster {
   uint64_t page_bytes = 0;
 };
 
-EncodedCluster encode_cluster(const TetClusterSource& source, uint64_t id, const std::string& name) {
+EncodedCluster encode_cluster(const TetClusterSource& source, uint64_t id, const std::string& name, bool store_bvh) {
   ClusterData d;
   source.cluster(id, d);
   EncodedCluster e;
@@ -321,6 +322,13 @@ EncodedCluster encode_cluster(const TetClusterSource& source, uint64_t id, const
     page = TetClusterPage::encode(d.positions, d.values, d.corners, steps);
   } catch (Error& err) {
     throw err.with_file(name).with_key(fmt::format("cluster {}", id));
+  }
+  if (store_bvh) {
+    // Step 0's BVH as tet_bvh builds it by default, after the tetrahedra.
+    const auto method = tet_bvh::BuildMethod::bih;
+    const tet_bvh::ClusterBvh bvh = tet_bvh::ClusterBvh::build(TetClusterPage::view(page), 0, method, kStoredBvhLeafSize);
+    const std::vector<std::byte> tail = bvh.encode(page.size(), method, kStoredBvhLeafSize);
+    page.insert(page.end(), tail.begin(), tail.end());
   }
   e.page_bytes = page.size();
   e.record = encode_page({RecordKind::tet_cluster, id}, page);
@@ -350,7 +358,9 @@ BuildResult build_tet_store(const TetClusterSource& source, const std::string& d
   provenance["steps"] = source.step_names();
   provenance["report"] = nlohmann::json::parse(source.report().to_json());
   const std::string source_json = provenance.dump();
-  const std::string build_json = nlohmann::json{{"cluster_tets", options.cluster_tets}}.dump();
+  nlohmann::json build = {{"cluster_tets", options.cluster_tets}};
+  if (options.store_bvh) build["bvh"] = {{"method", "bih"}, {"leaf_size", kStoredBvhLeafSize}};
+  const std::string build_json = build.dump();
   if (prepare_store_directory(dir, source_json, build_json, options.force, result)) return result;
 
   Manifest manifest;
@@ -384,7 +394,7 @@ BuildResult build_tet_store(const TetClusterSource& source, const std::string& d
     const uint64_t w1 = std::min(clusters, w0 + window);
     encoded.assign(size_t(w1 - w0), {});
     parallel_for<uint64_t>(w0, w1, 1, [&](uint64_t a, uint64_t b) {
-      for (uint64_t i = a; i < b; ++i) encoded[size_t(i - w0)] = encode_cluster(source, i, source.name());
+      for (uint64_t i = a; i < b; ++i) encoded[size_t(i - w0)] = encode_cluster(source, i, source.name(), options.store_bvh);
     });
     for (uint64_t i = w0; i < w1; ++i) {
       EncodedCluster& e = encoded[size_t(i - w0)];

@@ -80,8 +80,12 @@ struct ProceduralMeshSpec {
 };
 std::unique_ptr<TetClusterSource> make_procedural_mesh(const ProceduralMeshSpec& spec, uint32_t cluster_tets);
 
+/// The leaf size of the BVHs `import --bvh` stores (tet_bvh's default).
+inline constexpr uint32_t kStoredBvhLeafSize = 12;
+
 struct TetBuildOptions {
   uint32_t cluster_tets = 8192;
+  bool store_bvh = false;  ///< each cluster's BVH after its tetrahedra (dataset/tet_bvh.h)
   uint64_t map_size = 0;  ///< initial LMDB map size; 0 picks one from the mesh size
   bool map_growth = true;
   uint64_t batch_bytes = uint64_t(32) << 20;

@@ -38,7 +38,7 @@
 #include "renderers/common/render.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
-#include "renderers/tet_bvh/bvh.h"
+#include "dataset/tet_bvh.h"
 
 namespace brickyard::tet_bvh {
 
@@ -52,6 +52,7 @@ struct Params {
   double layer_opacity{};
   double bvh_cache_mib{};
   bool bvh_per_step{};
+  bool stored_bvh{};
   bool corner_culling{};
 };
 const ParamTable<Params>& params_table();
@@ -60,7 +61,7 @@ const ParamTable<Params>& params_table();
 struct Counters {
   std::atomic<uint64_t> packet_box_tests{0}, ray_box_tests{0}, isorange_tests{0}, extractions{0}, ray_polygon_tests{0},
       full_miss_rays{0}, full_hit_rays{0}, footprint_culled_rays{0}, footprint_culled_box_rays{0}, clusters_touched{0},
-      clusters_missing{0}, bvh_builds{0}, bvh_build_ns{0}, bvh_refits{0}, bvh_refit_ns{0};
+      clusters_missing{0}, bvh_builds{0}, bvh_build_ns{0}, bvh_refits{0}, bvh_refit_ns{0}, bvh_loads{0}, bvh_load_ns{0};
   void reset();
 };
 

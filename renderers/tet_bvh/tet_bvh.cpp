@@ -34,6 +34,9 @@ const ParamTable<Params>& params_table() {
       {"bvh_cache", &Params::bvh_cache_mib, 0, 0, 1 << 20,
        "MiB of cluster BVHs kept beside the cache (the least recently used are dropped, and rebuilt when needed); 0: "
        "one and a half times the L1 budget, room for the BVHs of every cluster L1 holds"},
+      {"stored_bvh", &Params::stored_bvh, 1, 0, 1,
+       "1: a cluster's BVH stored by the importer (import --bvh) is read instead of built, when it was built as sah and "
+       "leaf_size say; 0: always built when the cluster arrives"},
       {"bvh_per_step", &Params::bvh_per_step, 0, 0, 1,
        "time-varying meshes: 1: a cluster BVH built for each time step drawn (kept while the BVH cache holds them); 0: one "
        "BVH per cluster, refitted when the step changes (moved vertices, new values)"},
@@ -47,7 +50,7 @@ const ParamTable<Params>& params_table() {
 void Counters::reset() {
   for (auto* c : {&packet_box_tests, &ray_box_tests, &isorange_tests, &extractions, &ray_polygon_tests, &full_miss_rays,
                   &full_hit_rays, &footprint_culled_rays, &footprint_culled_box_rays, &clusters_touched, &clusters_missing,
-                  &bvh_builds, &bvh_build_ns, &bvh_refits, &bvh_refit_ns})
+                  &bvh_builds, &bvh_build_ns, &bvh_refits, &bvh_refit_ns, &bvh_loads, &bvh_load_ns})
     c->store(0, std::memory_order_relaxed);
 }
 
@@ -107,9 +110,25 @@ std::shared_ptr<const ClusterBvh> TetBvhRenderer::cluster_bvh(uint64_t cluster, 
       counters_.bvh_refit_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
     }
   }
+  const BuildMethod method = p_.sah ? BuildMethod::sah : BuildMethod::bih;
+  if (!built && p_.stored_bvh) {
+    // A BVH the importer stored (step 0's, if it was built as this frame would build it): read
+    // instead of built, and refitted for another step unless each step gets its own.
+    std::optional<ClusterBvh> stored;
+    try {
+      stored = ClusterBvh::stored(page, method, uint32_t(p_.leaf_size));
+    } catch (Error& e) {
+      throw e.with_file(ctx_.dataset().name).with_key(fmt::format("cluster {}", cluster));
+    }
+    if (stored && step_ != 0) stored = p_.bvh_per_step ? std::nullopt : stored->refit(page, step_);
+    if (stored) {
+      built = std::make_shared<const ClusterBvh>(std::move(*stored));
+      counters_.bvh_loads.fetch_add(1, std::memory_order_relaxed);
+      counters_.bvh_load_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
+    }
+  }
   if (!built) {
-    built = std::make_shared<const ClusterBvh>(
-        ClusterBvh::build(page, step_, p_.sah ? BuildMethod::sah : BuildMethod::bih, uint32_t(p_.leaf_size)));
+    built = std::make_shared<const ClusterBvh>(ClusterBvh::build(page, step_, method, uint32_t(p_.leaf_size)));
     counters_.bvh_builds.fetch_add(1, std::memory_order_relaxed);
     counters_.bvh_build_ns.fetch_add(uint64_t(watch.nanoseconds()), std::memory_order_relaxed);
   }
@@ -244,6 +263,8 @@ void TetBvhRenderer::add_statistics(FrameStats& stats) const {
                    {"clusters_missing", v(counters_.clusters_missing)},
                    {"bvh_builds", v(counters_.bvh_builds)},
                    {"bvh_build_ms", v(counters_.bvh_build_ns) * 1e-6},
+                   {"bvh_loads", v(counters_.bvh_loads)},
+                   {"bvh_load_ms", v(counters_.bvh_load_ns) * 1e-6},
                    {"bvh_refits", v(counters_.bvh_refits)},
                    {"bvh_refit_ms", v(counters_.bvh_refit_ns) * 1e-6},
                    {"time_step", double(step_)},

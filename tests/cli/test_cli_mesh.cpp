@@ -56,6 +56,28 @@ TEST(CliMesh, ProceduralImportInfoVerifyExportAndBack) {
   }
 }
 
+TEST(CliMesh, ImportWithBvhStoresThemAndInfoVerifyAndExportReadTheStore) {
+  testing::TempDir dir;
+  auto r = brickyard("-q import mesh:sphere --cells 10 --cluster-tets 1000 --bvh -o " + dir.file("b.store"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = brickyard("info " + dir.file("b.store"));
+  EXPECT_TRUE(contains(r.output, "BVHs stored with the clusters (bih, leaves of at most 12 tets, step 0)")) << r.output;
+  r = brickyard("-q verify " + dir.file("b.store"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "0 problems")) << r.output;
+  r = brickyard("-q export " + dir.file("b.store") + " -o " + dir.file("b.vtu"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "6000 tets")) << r.output;
+  // The same mesh without: a different build, refused unless --force.
+  r = brickyard("-q import mesh:sphere --cells 10 --cluster-tets 1000 -o " + dir.file("b.store"));
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "--force")) << r.output;
+  r = brickyard("-q import mesh:sphere --cells 10 --cluster-tets 1000 --force -o " + dir.file("b.store"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = brickyard("info " + dir.file("b.store"));
+  EXPECT_FALSE(contains(r.output, "BVHs stored")) << r.output;
+}
+
 TEST(CliMesh, ImportsFilesWrittenByVtkGmshAndTetgen) {
   testing::TempDir dir;
   struct Case {

@@ -14,7 +14,7 @@
 #include <string>
 
 #include "renderers/common/metrics.h"
-#include "renderers/tet_bvh/bvh.h"
+#include "dataset/tet_bvh.h"
 #include "renderers/tet_test_util.h"
 #include "session/render_session.h"
 #include "storage/store.h"
@@ -383,6 +383,81 @@ TEST_F(TetBvh, TheBvhCacheKeepsTheBvhsOfWhatL1Holds) {
   const auto [small_builds, small_bytes] = warm_builds({{"bvh_cache", 1}});
   EXPECT_GT(small_builds, 0);
   EXPECT_LE(small_bytes, double(1 << 20) + 200e3);  // the budget, and at most the one BVH just built
+}
+
+TEST_F(TetBvh, AStoredBvhIsReadInsteadOfBuiltAndRendersTheSame) {
+  build(lattice_mesh(10, 0.15, [](const Vec3d& p) { return length(p - Vec3d(0.5)); }), dir_.file("stored.store"), 256, true);
+  const Scene stored = tet_scene(dir_.file("stored.store"), kSphereIso, 64, "tet_bvh");
+  const FrameBuffers built = bvh_frame(sphere());
+  FrameStats st;
+  EXPECT_EQ(differing_pixels(bvh_frame(stored, {{"exact", 1}}, &st), built), 0);
+  // bvh_frame settles first: the frame it returns found every BVH cached; a cold one loads.
+  RenderSession::Options o;
+  o.backend = "tet_bvh";
+  o.params = {{"exact", 1}};
+  RenderSession cold(stored, o);
+  FrameBuffers fb;
+  st = cold.render(0, fb, {.depth = true, .normals = true});
+  EXPECT_GT(st.backend_value("bvh_loads"), 0);
+  EXPECT_EQ(st.backend_value("bvh_builds"), 0);
+  EXPECT_EQ(differing_pixels(fb, built), 0);
+  // Built otherwise than stored (SAH, other leaves), or not wanted: built, the same image.
+  for (const std::map<std::string, double>& params :
+       {std::map<std::string, double>{{"sah", 1}}, {{"leaf_size", 4}}, {{"stored_bvh", 0}}}) {
+    o.params = params;
+    o.params["exact"] = 1;
+    RenderSession session(stored, o);
+    st = session.render(0, fb, {.depth = true, .normals = true});
+    EXPECT_EQ(st.backend_value("bvh_loads"), 0);
+    EXPECT_GT(st.backend_value("bvh_builds"), 0);
+    EXPECT_EQ(differing_pixels(fb, built), 0);
+  }
+}
+
+TEST_F(TetBvh, AStoredBvhRefittedToOtherStepsEqualsARebuild) {
+  build(moving_sphere(3), dir_.file("moving.store"), 256, true);
+  const std::string body = std::string(kSphereIso) + R"(, "time_series": {"first": 0, "count": 3})";
+  std::vector<FrameStats> stats;
+  const std::vector<FrameBuffers> frames = series_frames(tet_scene(dir_.file("moving.store"), body, 64, "tet_bvh"), {}, &stats);
+  EXPECT_GT(stats[0].backend_value("bvh_loads"), 0);
+  for (int f = 0; f < 3; ++f) {
+    const Scene still = tet_scene(dir_.file("moving.store"), std::string(kSphereIso) + R"(, "time_step": )" + std::to_string(f),
+                                  64, "tet_bvh");
+    EXPECT_EQ(differing_pixels(frames[size_t(f)], bvh_frame(still, {{"stored_bvh", 0}})), 0) << "step " << f;
+  }
+}
+
+TEST(TetBvhTree, AStoredBvhThatDoesNotFitItsPageIsCorrupt) {
+  TetMesh m = lattice_mesh(4, 0.1, [](const Vec3d& p) { return p.x; });
+  std::vector<std::byte> page = TetClusterPage::encode(m.positions, m.scalars[0], m.tets);
+  const size_t plain = page.size();
+  using tet_bvh::BuildMethod;
+  using tet_bvh::ClusterBvh;
+  const ClusterBvh bvh = ClusterBvh::build(TetClusterPage::view(page), 0, BuildMethod::bih, 12);
+  const std::vector<std::byte> tail = bvh.encode(plain, BuildMethod::bih, 12);
+  page.insert(page.end(), tail.begin(), tail.end());
+  const std::optional<ClusterBvh> read = ClusterBvh::stored(TetClusterPage::view(page), BuildMethod::bih, 12);
+  ASSERT_TRUE(read);
+  EXPECT_EQ(read->bvh.order, bvh.bvh.order);
+  EXPECT_EQ(read->tet_range, bvh.tet_range);
+  EXPECT_FALSE(ClusterBvh::stored(TetClusterPage::view(page), BuildMethod::sah, 12));  // built otherwise
+  EXPECT_FALSE(ClusterBvh::stored(TetClusterPage::view(std::span(page).first(plain)), BuildMethod::bih, 12));  // none
+  const size_t header = plain + (8 - plain % 8) % 8;
+  auto corrupt = [&](size_t offset, uint32_t value) {
+    std::vector<std::byte> bad = page;
+    std::memcpy(bad.data() + offset, &value, sizeof value);
+    try {
+      ClusterBvh::stored(TetClusterPage::view(bad), BuildMethod::bih, 12);
+      ADD_FAILURE() << "accepted a stored BVH with " << value << " at " << offset;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), Errc::corrupt) << e.what();
+    }
+  };
+  corrupt(header + 12, 1u << 30);                                       // more nodes than the page holds
+  corrupt(header + 16, uint32_t(m.tets.size() / 4) + 5);                // more tets than the cluster has
+  corrupt(header + 24 + offsetof(tet_bvh::BvhNode, index), 1u << 20);  // the root's right child outside the tree
+  const size_t order = header + 24 + bvh.bvh.nodes.size() * sizeof(tet_bvh::BvhNode);
+  corrupt(order, 1u << 20);  // a slot naming a tet the cluster does not have
 }
 
 TEST(TetBvhTree, ARefitKeepsTheTopologyAndBoundsEveryNodesItems) {

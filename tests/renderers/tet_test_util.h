@@ -58,10 +58,11 @@ inline TetMesh lattice_mesh(int n, double jitter, const std::function<double(con
   return m;
 }
 
-inline void build(TetMesh mesh, const std::string& dir, uint32_t cluster_tets) {
+inline void build(TetMesh mesh, const std::string& dir, uint32_t cluster_tets, bool store_bvh = false) {
   auto source = partition_mesh(std::move(mesh), cluster_tets, "test mesh", R"({"kind": "test"})", 0);
   TetBuildOptions o;
   o.cluster_tets = cluster_tets;
+  o.store_bvh = store_bvh;
   build_tet_store(*source, dir, o);
 }
 

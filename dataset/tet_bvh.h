@@ -1,10 +1,16 @@
 #pragma once
-/// @file bvh.h
+/// @file tet_bvh.h
 /// @brief tet_bvh's implicit 4D min/max BVH (Wald, Friedrich, Knoll and Hansen): every node
 /// bounds its tets in {x, y, z, value}, so that one test culls a subtree in space (the ray's
 /// box test) or in value (the implicit test: no isovalue between its min and max). Built per
-/// cluster when the cluster first arrives, for the scene's time step, and once over the
-/// cluster table.
+/// cluster when the cluster first arrives, or stored after its page's tetrahedra by the
+/// importer (`import --bvh`), and once over the cluster table. Here, beside the page layout,
+/// because both the importer and the back end need it.
+///
+/// A stored BVH (step 0's), from the first 8-byte boundary after the tetrahedra: u32 magic
+/// "TBV1", u32 build method (0 BIH, 1 SAH), u32 leaf size, u32 node count N, u32 slot count
+/// L, u32 tets left out; N nodes; L u32 tet indices (leaf slots); L pairs of floats (each
+/// slot's value range).
 ///
 /// Node layout: lo and hi as 4-float vectors (x, y, z, value), then the right child (inner)
 /// or the first item (leaf), the item count (0 for inner nodes) and the split axis, 40 bytes.
@@ -62,6 +68,13 @@ struct ClusterBvh {
   uint32_t step = 0;             ///< the time step the bounds are for
 
   static ClusterBvh build(const TetClusterPage& page, uint32_t step, BuildMethod method, uint32_t leaf_size);
+  /// @brief The BVH stored in the page, when it holds one built by `method` with leaves of
+  /// `leaf_size` (else nothing). @throws Error(corrupt) when the stored one does not fit the
+  /// page (its counts, children or tet indices).
+  static std::optional<ClusterBvh> stored(const TetClusterPage& page, BuildMethod method, uint32_t leaf_size);
+  /// @brief This BVH as the bytes to append to its page (padding to 8 bytes first, given the
+  /// page's current size).
+  std::vector<std::byte> encode(size_t page_size, BuildMethod method, uint32_t leaf_size) const;
   /// @brief This BVH's topology with its bounds refitted to `step` (moved vertices, new
   /// values); nothing when the set of valid tets differs at that step (a rebuild is needed).
   std::optional<ClusterBvh> refit(const TetClusterPage& page, uint32_t step) const;

@@ -1,10 +1,15 @@
-#include "renderers/tet_bvh/bvh.h"
+#include "dataset/tet_bvh.h"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
 
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include "core/error.h"
 #include "core/math.h"
 
 namespace brickyard::tet_bvh {
@@ -235,6 +240,63 @@ std::optional<ClusterBvh> ClusterBvh::refit(const TetClusterPage& page, uint32_t
   refit_bvh(out.bvh, slot_bounds.data());
   out.tet_range.resize(slots * 2);
   for (size_t s = 0; s < slots; ++s) out.tet_range[2 * s] = slot_bounds[s].lo[3], out.tet_range[2 * s + 1] = slot_bounds[s].hi[3];
+  return out;
+}
+
+namespace {
+constexpr uint32_t kStoredMagic = 0x31564254;  // "TBV1"
+constexpr size_t kStoredHeader = 6 * sizeof(uint32_t);
+size_t padding(size_t offset) { return (8 - offset % 8) % 8; }
+}  // namespace
+
+std::vector<std::byte> ClusterBvh::encode(size_t page_size, BuildMethod method, uint32_t leaf_size) const {
+  const size_t pad = padding(page_size), slots = bvh.order.size();
+  std::vector<std::byte> out(pad + kStoredHeader + bvh.nodes.size() * sizeof(BvhNode) + slots * 3 * sizeof(uint32_t));
+  std::byte* p = out.data() + pad;
+  const uint32_t header[6] = {kStoredMagic, uint32_t(method), leaf_size, uint32_t(bvh.nodes.size()), uint32_t(slots), skipped};
+  std::memcpy(p, header, sizeof header);
+  p += sizeof header;
+  std::memcpy(p, bvh.nodes.data(), bvh.nodes.size() * sizeof(BvhNode));
+  p += bvh.nodes.size() * sizeof(BvhNode);
+  std::memcpy(p, bvh.order.data(), slots * sizeof(uint32_t));
+  p += slots * sizeof(uint32_t);
+  std::memcpy(p, tet_range.data(), tet_range.size() * sizeof(float));
+  return out;
+}
+
+std::optional<ClusterBvh> ClusterBvh::stored(const TetClusterPage& page, BuildMethod method, uint32_t leaf_size) {
+  const std::span<const std::byte> tail = page.tail;
+  const size_t start = padding(TetClusterPage::bytes(page.vertex_count, page.tet_count, page.steps, page.position_sets));
+  if (tail.size() < start + kStoredHeader) return std::nullopt;
+  uint32_t h[6];
+  std::memcpy(h, tail.data() + start, sizeof h);
+  if (h[0] != kStoredMagic) return std::nullopt;  // zeros: the page holds none
+  if (h[1] != uint32_t(method) || h[2] != leaf_size) return std::nullopt;
+  const size_t nodes = h[3], slots = h[4];
+  auto bad = [&](const std::string& what) { return Error(Errc::corrupt, "the cluster's stored BVH " + what); };
+  if (slots + h[5] != page.tet_count)
+    throw bad(fmt::format("holds {} tets and leaves out {}, the page has {}", slots, h[5], page.tet_count));
+  if (nodes > slots * 2 + 1 || tail.size() < start + kStoredHeader + nodes * sizeof(BvhNode) + slots * 3 * sizeof(uint32_t))
+    throw bad(fmt::format("of {} nodes and {} slots does not fit in the page's {} bytes after its tets", nodes, slots,
+                          tail.size()));
+  ClusterBvh out;
+  out.skipped = h[5];
+  out.bvh.nodes.resize(nodes);
+  out.bvh.order.resize(slots);
+  out.tet_range.resize(slots * 2);
+  const std::byte* p = tail.data() + start + kStoredHeader;
+  std::memcpy(out.bvh.nodes.data(), p, nodes * sizeof(BvhNode));
+  p += nodes * sizeof(BvhNode);
+  std::memcpy(out.bvh.order.data(), p, slots * sizeof(uint32_t));
+  p += slots * sizeof(uint32_t);
+  std::memcpy(out.tet_range.data(), p, slots * 2 * sizeof(float));
+  for (size_t i = 0; i < nodes; ++i) {
+    const BvhNode& n = out.bvh.nodes[i];
+    const bool fits = n.leaf() ? size_t(n.index) + n.count <= slots : n.index > i + 1 && n.index < nodes;
+    if (!fits || (!n.leaf() && i + 1 >= nodes)) throw bad(fmt::format("node {} points outside the tree", i));
+  }
+  for (uint32_t t : out.bvh.order)
+    if (t >= page.tet_count) throw bad(fmt::format("names tet {} of a cluster of {}", t, page.tet_count));
   return out;
 }
 
