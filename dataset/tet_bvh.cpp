@@ -290,13 +290,46 @@ std::optional<ClusterBvh> ClusterBvh::stored(const TetClusterPage& page, BuildMe
   std::memcpy(out.bvh.order.data(), p, slots * sizeof(uint32_t));
   p += slots * sizeof(uint32_t);
   std::memcpy(out.tet_range.data(), p, slots * 2 * sizeof(float));
+  // A tree, as the builder lays it out: every node but the root one parent, children after
+  // their parent, the leaves in node order covering the slots one after the other, no deeper
+  // than traversal's stack; every slot a distinct valid tet; and the bounds its tets' own.
+  if ((nodes == 0) != (slots == 0)) throw bad(fmt::format("has {} nodes for {} tets", nodes, slots));
+  constexpr uint32_t kMaxDepth = 100;
+  std::vector<uint8_t> parents(nodes, 0);
+  std::vector<uint32_t> depth(nodes, 0);
+  size_t next_slot = 0;
   for (size_t i = 0; i < nodes; ++i) {
     const BvhNode& n = out.bvh.nodes[i];
-    const bool fits = n.leaf() ? size_t(n.index) + n.count <= slots : n.index > i + 1 && n.index < nodes;
-    if (!fits || (!n.leaf() && i + 1 >= nodes)) throw bad(fmt::format("node {} points outside the tree", i));
+    if (i > 0 && parents[i] != 1) throw bad(fmt::format("node {} has {} parents", i, int(parents[i])));
+    if (n.leaf()) {
+      if (n.index != next_slot || size_t(n.index) + n.count > slots)
+        throw bad(fmt::format("leaf {} holds slots {} to {}, not the next ones from {}", i, n.index, n.index + n.count, next_slot));
+      next_slot += n.count;
+      continue;
+    }
+    if (!(i + 1 < nodes && n.index > i + 1 && n.index < nodes)) throw bad(fmt::format("node {} points outside the tree", i));
+    if (depth[i] >= kMaxDepth) throw bad(fmt::format("is deeper than {} levels", kMaxDepth));
+    for (size_t child : {i + 1, size_t(n.index)}) parents[child] = uint8_t(std::min(2, parents[child] + 1)), depth[child] = depth[i] + 1;
   }
-  for (uint32_t t : out.bvh.order)
-    if (t >= page.tet_count) throw bad(fmt::format("names tet {} of a cluster of {}", t, page.tet_count));
+  if (next_slot != slots) throw bad(fmt::format("leaves cover {} of its {} slots", next_slot, slots));
+  std::vector<uint8_t> seen(page.tet_count, 0);
+  std::vector<Bounds4> slot_bounds(slots);
+  const float* pos = page.positions_at(0);
+  const float* val = page.values_at(0);
+  for (size_t k = 0; k < slots; ++k) {
+    const uint32_t t = out.bvh.order[k];
+    if (t >= page.tet_count || seen[t]) throw bad(fmt::format("names tet {} twice or of a cluster of {}", t, page.tet_count));
+    seen[t] = 1;
+    if (!tet_bounds(page, pos, val, t, slot_bounds[k])) throw bad(fmt::format("holds tet {}, which is not valid", t));
+    if (out.tet_range[2 * k] != slot_bounds[k].lo[3] || out.tet_range[2 * k + 1] != slot_bounds[k].hi[3])
+      throw bad(fmt::format("gives tet {} a value range that is not its own", t));
+  }
+  BoxBvh refitted = out.bvh;
+  refit_bvh(refitted, slot_bounds.data());
+  for (size_t i = 0; i < nodes; ++i)
+    for (int a = 0; a < 4; ++a)  // by value: the two zeros are one
+      if (refitted.nodes[i].lo[a] != out.bvh.nodes[i].lo[a] || refitted.nodes[i].hi[a] != out.bvh.nodes[i].hi[a])
+        throw bad(fmt::format("bounds node {} otherwise than its tets", i));
   return out;
 }
 

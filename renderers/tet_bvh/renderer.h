@@ -167,6 +167,7 @@ class TetBvhRenderer final : public Renderer {
   // pixel whether it is finished and from where an exact pass resumes its ray.
   mutable std::vector<uint8_t> tile_missed_, pixel_done_;
   mutable std::vector<double> resume_t_;
+  int state_width_ = 0;  ///< the image width pixel_done_ and resume_t_ are laid out for
   /// Where pixel (x, y)'s state lies: tile by tile, so that a packet's is contiguous.
   size_t pixel_slot(int x, int y) const {
     const size_t tile = size_t(y / kTileSize) * size_t(tiles_x_) + size_t(x / kTileSize);

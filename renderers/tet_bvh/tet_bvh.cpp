@@ -170,7 +170,8 @@ void TetBvhRenderer::begin_frame(const FrameSetup& setup) {
   // Tile-major per-pixel state, written by every pixel in the first pass (so never cleared);
   // the slots of edge tiles past the image stay done.
   const size_t slots = tiles * size_t(kTileSize * kTileSize);
-  if (pixel_done_.size() != slots) pixel_done_.assign(slots, 1), resume_t_.assign(slots, -1.0);
+  if (pixel_done_.size() != slots || state_width_ != setup.width)  // a new layout: slots past the image done
+    pixel_done_.assign(slots, 1), resume_t_.assign(slots, -1.0), state_width_ = setup.width;
   unfinished_.store(0, std::memory_order_relaxed);
   missing_.clear();
   focus_tile_ = UINT32_MAX;

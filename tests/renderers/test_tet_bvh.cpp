@@ -458,6 +458,13 @@ TEST(TetBvhTree, AStoredBvhThatDoesNotFitItsPageIsCorrupt) {
   corrupt(header + 24 + offsetof(tet_bvh::BvhNode, index), 1u << 20);  // the root's right child outside the tree
   const size_t order = header + 24 + bvh.bvh.nodes.size() * sizeof(tet_bvh::BvhNode);
   corrupt(order, 1u << 20);  // a slot naming a tet the cluster does not have
+  ASSERT_FALSE(bvh.bvh.nodes[1].leaf());
+  corrupt(header + 24 + offsetof(tet_bvh::BvhNode, index), 3);  // the root's right child shared with node 1's subtree
+  float shrunk = bvh.bvh.nodes[0].lo[0] + 0.25f;
+  uint32_t bits;
+  std::memcpy(&bits, &shrunk, sizeof bits);
+  corrupt(header + 24, bits);  // the root's box no longer holds its tets
+  corrupt(order + sizeof(uint32_t), bvh.bvh.order[0]);  // one tet in two slots
 }
 
 TEST(TetBvhTree, ARefitKeepsTheTopologyAndBoundsEveryNodesItems) {
