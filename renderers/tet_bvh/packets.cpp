@@ -280,9 +280,9 @@ void TetBvhRenderer::leaf(Packet& p, const TetClusterPage& page, const ClusterBv
   // The frustum's far bound shrinks with the hits: boxes behind every ray's hit are culled
   // whole (they still project onto the packet).
   if (hits) {
-    p.t_hi = -kInf;
-    for (int l = 0; l < p.lanes; ++l)
-      if (p.active[l]) p.t_hi = std::max(p.t_hi, p.limit(l));
+    double far = -kInf;  // a local, so that the reduction does not wait on a store each lane
+    for (int l = 0; l < p.lanes; ++l) far = std::max(far, p.active[l] ? p.limit(l) : -kInf);
+    p.t_hi = far;
   }
   counters_.isorange_tests.fetch_add(c.isorange, std::memory_order_relaxed);
   counters_.extractions.fetch_add(c.extractions, std::memory_order_relaxed);
