@@ -83,3 +83,21 @@ build_embree_frame() {
 embree_summary() {
   "$1" -c 'import json,sys; e=json.load(open(sys.argv[1])); print("build %.2f ms, first frame %.2f ms, steady %.2f ms" % (e["build_ms"], e["first_frame_ms"], e["steady_frame_ms"]))' "$2"
 }
+
+# run_embree BOX: Embree's BVH build and frames over $out/surface.bymesh in BOX (lo and hi,
+# six comma-separated numbers), with the driver's camera, size, threads, frames and quality.
+run_embree() {
+  "$exe" --mesh "$out/surface.bymesh" --box "$1" "${cam[@]}" --width "$width" --height "$height" \
+    --threads "$threads" --frames "$frames" --quality "$embree_quality" --depth "$out/embree-depth.f32" --json "$out/embree.json" >/dev/null
+  echo "$me: embree: $(embree_summary "$py" "$out/embree.json")" >&2
+}
+
+# run_brickyard: the back end's frames of $out/scene.json in one process, wall clock from t0
+# to t1 (nanoseconds).
+run_brickyard() {
+  echo "$me: brickyard $backend: $frames frames of one camera" >&2
+  t0=$(date +%s%N)
+  "${by[@]}" render "$out/scene.json" --backend "$backend" "${sets[@]}" --frames all \
+    -o "$out/frames/colour.png" --depth "$out/frames/depth.png" --stats "$out/brickyard-stats.json" >"$out/brickyard.log"
+  t1=$(date +%s%N)
+}

@@ -127,6 +127,17 @@ def write_bymesh(path, points, tris):
         f.write(np.ascontiguousarray(tris).tobytes())
 
 
+def timed_updates(algorithm, repeats):
+    """Milliseconds of each of `repeats` full re-executions of a VTK algorithm."""
+    runs = []
+    for _ in range(repeats):
+        algorithm.Modified()
+        t0 = time.perf_counter()
+        algorithm.Update()
+        runs.append((time.perf_counter() - t0) * 1e3)
+    return runs
+
+
 def cmd_vtk(a):
     import numpy as np
     from vtkmodules.vtkCommonCore import vtkVersion
@@ -160,12 +171,7 @@ def cmd_vtk(a):
     fe.ComputeNormalsOff()
     fe.ComputeGradientsOff()
     fe.ComputeScalarsOff()
-    runs = []
-    for _ in range(a.repeats):
-        fe.Modified()
-        t0 = time.perf_counter()
-        fe.Update()
-        runs.append((time.perf_counter() - t0) * 1e3)
+    runs = timed_updates(fe, a.repeats)
     points, tris = triangles_of(fe.GetOutput(), "vtkFlyingEdges3D")
     write_bymesh(a.mesh, points, tris)
 
@@ -509,12 +515,7 @@ def cmd_tets_vtk(a):
     cg.ComputeNormalsOff()
     cg.ComputeScalarsOff()
     cg.UseScalarTreeOff()
-    runs = []
-    for _ in range(a.repeats):
-        cg.Modified()
-        t0 = time.perf_counter()
-        cg.Update()
-        runs.append((time.perf_counter() - t0) * 1e3)
+    runs = timed_updates(cg, a.repeats)
     points, tris = triangles_of(cg.GetOutput(), "vtkContour3DLinearGrid")
     write_bymesh(a.mesh, points, tris)
 

@@ -130,17 +130,11 @@ vtk_args=()
 # --- 2. Embree: BVH build and frames over those triangles ---------------------------------------
 
 box="$("$py" -c 'import json,sys; s=json.load(open(sys.argv[1])); o=s["origin"]; h=[o[a]+s["spacing"][a]*(s["dims"][a]-1) for a in range(3)]; print(",".join(repr(float(v)) for v in o+h))' "$raw.json")"
-"$exe" --mesh "$out/surface.bymesh" --box "$box" "${cam[@]}" --width "$width" --height "$height" \
-  --threads "$threads" --frames "$frames" --quality "$embree_quality" --depth "$out/embree-depth.f32" --json "$out/embree.json" >/dev/null
-echo "peers: embree: $(embree_summary "$py" "$out/embree.json")" >&2
+run_embree "$box"
 
 # --- 3. brickyard ---------------------------------------------------------------------------------
 
-echo "peers: brickyard $backend: $frames frames of one camera" >&2
-t0=$(date +%s%N)
-"${by[@]}" render "$out/scene.json" --backend "$backend" "${sets[@]}" --frames all \
-  -o "$out/frames/colour.png" --depth "$out/frames/depth.png" --stats "$out/brickyard-stats.json" >"$out/brickyard.log"
-t1=$(date +%s%N)
+run_brickyard
 
 # --- the table -------------------------------------------------------------------------------------
 

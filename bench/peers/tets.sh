@@ -163,17 +163,11 @@ vtk_args=()
 # --- 2. Embree: BVH build and frames over those triangles ---------------------------------------
 
 box="$("$py" -c 'import json,sys; b=json.load(open(sys.argv[1]))["mesh"]["bounds"]; print(",".join(repr(float(v)) for v in b[0]+b[1]))' "$out/manifest.json")"
-"$exe" --mesh "$out/surface.bymesh" --box "$box" "${cam[@]}" --width "$width" --height "$height" \
-  --threads "$threads" --frames "$frames" --quality "$embree_quality" --depth "$out/embree-depth.f32" --json "$out/embree.json" >/dev/null
-echo "peers-tets: embree: $(embree_summary "$py" "$out/embree.json")" >&2
+run_embree "$box"
 
 # --- 3. brickyard, a fresh process: frame 0 loads the clusters and builds their BVHs -----------
 
-echo "peers-tets: brickyard $backend: $frames frames of one camera" >&2
-t0=$(date +%s%N)
-"${by[@]}" render "$out/scene.json" --backend "$backend" "${sets[@]}" --frames all \
-  -o "$out/frames/colour.png" --depth "$out/frames/depth.png" --stats "$out/brickyard-stats.json" >"$out/brickyard.log"
-t1=$(date +%s%N)
+run_brickyard
 
 # --- the table -------------------------------------------------------------------------------------
 
