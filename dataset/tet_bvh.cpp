@@ -36,16 +36,17 @@ struct Builder {
   float c(uint32_t item, int axis) const { return centre[size_t(item) * 3 + size_t(axis)]; }
 
   /// Where to split [begin, end) and along which axis; mid == begin or end means no split.
-  size_t split(size_t begin, size_t end, const Bounds4& b, int& axis) {
+  size_t split(size_t begin, size_t end, int& axis) {
     float clo[3] = {kInf, kInf, kInf}, chi[3] = {-kInf, -kInf, -kInf};
     for (size_t i = begin; i < end; ++i)
       for (int a = 0; a < 3; ++a) clo[a] = std::min(clo[a], c(out.order[i], a)), chi[a] = std::max(chi[a], c(out.order[i], a));
     if (method == BuildMethod::sah) return sah_split(begin, end, clo, chi, axis);
-    // BIH: the middle of the node's box along its longest axis; centres decide the side.
+    // BIH-style: the middle of the centres' box along its longest axis (the node's own box
+    // comes from its children afterwards, so no pass over the items is spent on it here).
     axis = 0;
     for (int a = 1; a < 3; ++a)
-      if (b.hi[a] - b.lo[a] > b.hi[axis] - b.lo[axis]) axis = a;
-    const float plane = 0.5f * (b.lo[axis] + b.hi[axis]);
+      if (chi[a] - clo[a] > chi[axis] - clo[axis]) axis = a;
+    const float plane = 0.5f * (clo[axis] + chi[axis]);
     auto mid = std::partition(out.order.begin() + long(begin), out.order.begin() + long(end),
                               [&](uint32_t i) { return c(i, axis) < plane; });
     return size_t(mid - out.order.begin());
@@ -107,28 +108,30 @@ struct Builder {
     return size_t(mid - out.order.begin());
   }
 
-  uint32_t node(size_t begin, size_t end) {
+  /// Builds the subtree over [begin, end); its bounds go to `bounds`.
+  uint32_t node(size_t begin, size_t end, Bounds4& bounds) {
     const uint32_t index = uint32_t(out.nodes.size());
     out.nodes.emplace_back();
-    const Bounds4 b = bounds_of(begin, end);
     BvhNode n;
-    std::copy(b.lo, b.lo + 4, n.lo);
-    std::copy(b.hi, b.hi + 4, n.hi);
     if (end - begin <= leaf_size) {
+      bounds = bounds_of(begin, end);
       n.index = uint32_t(begin), n.count = uint16_t(end - begin);
-      out.nodes[index] = n;
-      return index;
+    } else {
+      int axis = 0;
+      size_t mid = split(begin, end, axis);
+      if (mid == begin || mid == end) {  // every centre on one side: split by count along the axis
+        mid = begin + (end - begin) / 2;
+        std::nth_element(out.order.begin() + long(begin), out.order.begin() + long(mid), out.order.begin() + long(end),
+                         [&](uint32_t x, uint32_t y) { return c(x, axis) < c(y, axis) || (c(x, axis) == c(y, axis) && x < y); });
+      }
+      Bounds4 right;
+      node(begin, mid, bounds);
+      n.index = node(mid, end, right);
+      n.axis = uint16_t(axis);
+      for (int a = 0; a < 4; ++a) bounds.lo[a] = std::min(bounds.lo[a], right.lo[a]), bounds.hi[a] = std::max(bounds.hi[a], right.hi[a]);
     }
-    int axis = 0;
-    size_t mid = split(begin, end, b, axis);
-    if (mid == begin || mid == end) {  // everything on one side: split by count along the axis
-      mid = begin + (end - begin) / 2;
-      std::nth_element(out.order.begin() + long(begin), out.order.begin() + long(mid), out.order.begin() + long(end),
-                       [&](uint32_t x, uint32_t y) { return c(x, axis) < c(y, axis) || (c(x, axis) == c(y, axis) && x < y); });
-    }
-    node(begin, mid);
-    n.index = node(mid, end);
-    n.axis = uint16_t(axis);
+    std::copy(bounds.lo, bounds.lo + 4, n.lo);
+    std::copy(bounds.hi, bounds.hi + 4, n.hi);
     out.nodes[index] = n;
     return index;
   }
@@ -144,7 +147,8 @@ BoxBvh build_bvh(const std::vector<Bounds4>& items, BuildMethod method, uint32_t
     b.out.order[i] = uint32_t(i);
     for (int a = 0; a < 3; ++a) b.centre[i * 3 + size_t(a)] = 0.5f * (items[i].lo[a] + items[i].hi[a]);
   }
-  if (!items.empty()) b.node(0, items.size());
+  Bounds4 root;
+  if (!items.empty()) b.node(0, items.size(), root);
   return std::move(b.out);
 }
 
