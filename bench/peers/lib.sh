@@ -101,3 +101,27 @@ run_brickyard() {
     -o "$out/frames/colour.png" --depth "$out/frames/depth.png" --stats "$out/brickyard-stats.json" >"$out/brickyard.log"
   t1=$(date +%s%N)
 }
+
+# shared_option OPT VALUE: checks and sets the options both drivers take (the caller has
+# taken OPT's VALUE; the driver's own options come first in its case).
+shared_option() {
+  local opt="$1" val="$2"
+  case "$opt" in
+    --iso) is_number "$val" || die "--iso: '$val' is not a number"; iso="$val" ;;
+    --backend) [[ "$val" =~ ^[A-Za-z0-9_.-]+$ ]] || die "--backend: '$val' is not a back-end name"; backend="$val" ;;
+    --width) { is_int "$val" && [ "$val" -ge 1 ] && [ "$val" -le 16384 ]; } || die "--width: '$val' is not an integer in [1, 16384]"; width="$val" ;;
+    --height) { is_int "$val" && [ "$val" -ge 1 ] && [ "$val" -le 16384 ]; } || die "--height: '$val' is not an integer in [1, 16384]"; height="$val" ;;
+    --frames) { is_int "$val" && [ "$val" -ge 2 ] && [ "$val" -le 1000 ]; } || die "--frames: '$val' is not an integer in [2, 1000]"; frames="$val" ;;
+    --threads) { is_int "$val" && [ "$val" -ge 1 ] && [ "$val" -le 1024 ]; } || die "--threads: '$val' is not an integer in [1, 1024]"; threads="$val" ;;
+    --eye) is_vec3 "$val" || die "--eye: '$val' is not X,Y,Z"; eye="$val" ;;
+    --target) is_vec3 "$val" || die "--target: '$val' is not X,Y,Z"; target="$val" ;;
+    --up) is_vec3 "$val" || die "--up: '$val' is not X,Y,Z"; up="$val" ;;
+    --fov) is_number "$val" || die "--fov: '$val' is not a number"; fov="$val" ;;
+    --set) [[ "$val" =~ ^[A-Za-z0-9_]+=.+$ ]] || die "--set: '$val' is not NAME=VALUE"; sets+=(--set "$val") ;;
+    --vtk-smp) case "$val" in Sequential | STDThread | TBB | OpenMP) vtk_smp="$val" ;; *) die "--vtk-smp: '$val' is not Sequential, STDThread, TBB or OpenMP" ;; esac ;;
+    --embree-quality) case "$val" in low | medium | high) embree_quality="$val" ;; *) die "--embree-quality: '$val' is not low, medium or high" ;; esac ;;
+    --max-mismatch) is_number "$val" || die "--max-mismatch: '$val' is not a number"; max_mismatch="$val" ;;
+    --brickyard) brickyard="$val" ;;
+    --out) [ -n "$val" ] || die "--out: an empty path"; out="$val" ;;
+  esac
+}

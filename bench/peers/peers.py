@@ -694,18 +694,21 @@ def main():
     s.add_argument("--mesh", required=True)
     s.add_argument("--json", required=True)
 
+    def report_args(s):  # what both reports take beside their inputs
+        s.add_argument("--iso", type=float, required=True)
+        s.add_argument("--width", type=int, required=True)
+        s.add_argument("--height", type=int, required=True)
+        s.add_argument("--threads", type=int, required=True)
+        s.add_argument("--by-wall-ms", type=float, required=True)
+        s.add_argument("--max-mismatch", type=float, default=0.01)
+        camera_args(s)
+
     s = sub.add_parser("report")
     s.add_argument("--dir", required=True)
     s.add_argument("--raw", required=True)
     s.add_argument("--store", required=True)
     s.add_argument("--field", required=True)
-    s.add_argument("--iso", type=float, required=True)
-    s.add_argument("--width", type=int, required=True)
-    s.add_argument("--height", type=int, required=True)
-    s.add_argument("--threads", type=int, required=True)
-    s.add_argument("--by-wall-ms", type=float, required=True)
-    s.add_argument("--max-mismatch", type=float, default=0.01)
-    camera_args(s)
+    report_args(s)
 
     s = sub.add_parser("tets-vtk")
     s.add_argument("--vtu", required=True)
@@ -723,13 +726,7 @@ def main():
     s.add_argument("--manifest", required=True)
     s.add_argument("--store", required=True)
     s.add_argument("--source", required=True)
-    s.add_argument("--iso", type=float, required=True)
-    s.add_argument("--width", type=int, required=True)
-    s.add_argument("--height", type=int, required=True)
-    s.add_argument("--threads", type=int, required=True)
-    s.add_argument("--by-wall-ms", type=float, required=True)
-    s.add_argument("--max-mismatch", type=float, default=0.01)
-    camera_args(s)
+    report_args(s)
 
     a = p.parse_args()
     {"scene": cmd_scene, "vtk": cmd_vtk, "report": cmd_report, "tets-vtk": cmd_tets_vtk,
