@@ -160,6 +160,7 @@ void run_import(const ImportOptions& o) {
                            r.manifest.levels, format_bytes(double(r.stored_bytes)), format_bytes(double(r.input_bytes)),
                            double(r.input_bytes) / std::max<double>(1, double(r.stored_bytes)), format_duration(r.seconds),
                            format_bytes(double(r.input_bytes) / std::max(1e-9, r.seconds)));
+  for (const std::string& w : r.warnings) std::cerr << fmt::format("warning: {}: {}\n", source->name(), w);
   if (o.octree) run_build_octree(o.out, {});
 }
 

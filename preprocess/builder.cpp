@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cfloat>
 #include <cmath>
 #include <condition_variable>
 #include <cstring>
@@ -609,12 +610,32 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
                               s.stored_bytes.load()});
     result.stored_bytes += s.stored_bytes.load();
   }
+  result.warnings = value_range_warnings(manifest.min_value, manifest.max_value);
   store.finish(manifest, ctx.nodes);
   manifest.complete = true;
   result.manifest = manifest;
   result.seconds = watch.seconds();
   result.input_bytes = source.input_bytes();
   return result;
+}
+
+std::vector<std::string> value_range_warnings(double min_value, double max_value) {
+  std::vector<std::string> warnings;
+  const double largest = std::max(std::fabs(min_value), std::fabs(max_value));
+  if (!(largest < std::numeric_limits<double>::infinity())) return warnings;  // an empty store
+  if (largest >= double(FLT_MAX) / 2) {
+    warnings.push_back(fmt::format(
+        "values reach {:g}, within a factor of 2 of the largest float ({:g}): the renderers interpolate in single "
+        "precision, and their gradients and crossings lose accuracy there; scaling the data down by a power of two "
+        "(exact) avoids it",
+        largest, double(FLT_MAX)));
+  } else if (largest > 0 && largest < double(FLT_MIN)) {
+    warnings.push_back(fmt::format(
+        "every value is denormal (at most {:g} in magnitude, below the smallest normal float, {:g}): single precision "
+        "keeps few significant bits there; scaling the data up by a power of two (exact) avoids it",
+        largest, double(FLT_MIN)));
+  }
+  return warnings;
 }
 
 }  // namespace brickyard

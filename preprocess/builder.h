@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 #include <utility>
 
 #include "storage/brick_codec.h"
@@ -59,7 +60,14 @@ struct BuildResult {
   double seconds = 0;
   uint64_t input_bytes = 0;
   uint64_t stored_bytes = 0;
+  /// What the user should know about the data though the build succeeded (value_range_warnings).
+  std::vector<std::string> warnings;
 };
+
+/// @brief Warnings for a value range single precision handles badly: values within a factor of
+/// 2 of the largest float (a difference of two voxels of opposite sign may overflow), or every
+/// value but zero denormal (below the smallest normal float, where precision runs out).
+std::vector<std::string> value_range_warnings(double min_value, double max_value);
 
 /// @brief Decides what to do with whatever is at `dir` before a build: nothing there goes
 /// ahead; an incomplete store is removed (result.rebuilt_incomplete); a complete one from the

@@ -12,6 +12,8 @@
 #include <cmath>
 #include <optional>
 
+#include "core/math.h"
+
 namespace brickyard {
 
 /// @brief g(s) = c0 + c1 s + c2 s^2 + c3 s^3.
@@ -223,24 +225,57 @@ inline std::optional<double> first_root_falsi(const Cubic& g, double length, int
   return falsi_crossing(g, b.lo, b.hi, b.glo, b.ghi, steps, tolerance * length);
 }
 
+/// @brief The last bracket bisect_crossing() narrowed a crossing to: g(a) = ga and g(b) = gb on
+/// either side of it (b alone where gb is exactly zero).
+struct CrossingBracket {
+  double a = 0, b = 0, ga = 0, gb = 0;
+};
+
 /// @brief The crossing of a function between two samples that bracket it: g(a) = ga and
 /// g(b) = gb differ in sign, or gb is exactly zero (then b is the crossing). `steps` bisections
 /// (each one evaluation of g) narrow the bracket; the result is where the secant through its
 /// ends crosses zero: on a field smooth inside the last bracket the error falls with the
 /// bracket's square rather than its width, for no evaluation more. The marching back ends
-/// refine their isosurface hits with it.
+/// refine their isosurface hits with it. `last`, if given, receives the last bracket (for
+/// crossing_gradient()).
 template <typename G>
-double bisect_crossing(G&& g, double a, double b, double ga, double gb, int steps) {
-  if (gb == 0) return b;
+double bisect_crossing(G&& g, double a, double b, double ga, double gb, int steps, CrossingBracket* last = nullptr) {
+  auto result = [&](double t) {
+    if (last) *last = {a, b, ga, gb};
+    return t;
+  };
+  if (gb == 0) return result(b);
   for (int it = 0; it < steps; ++it) {
     const double mid = 0.5 * (a + b);
     const double gm = g(mid);
     if ((gm < 0) == (ga < 0)) a = mid, ga = gm;
     else b = mid, gb = gm;
   }
-  if (gb == 0) return b;
-  const double t = a + (b - a) * (ga / (ga - gb));
-  return t >= std::min(a, b) && t <= std::max(a, b) ? t : 0.5 * (a + b);  // NaN samples: the midpoint
+  if (gb == 0) return result(b);
+  // ga / (ga - gb) without forming ga - gb, which overflows where the samples are of opposite
+  // signs and near the largest float.
+  const double w = std::fabs(ga) / (std::fabs(ga) + std::fabs(gb));
+  const double t = a + (b - a) * (std::isfinite(w) ? w : 0.5);
+  return result(t >= std::min(a, b) && t <= std::max(a, b) ? t : 0.5 * (a + b));  // NaN samples: the midpoint
+}
+
+/// @brief The gradient to shade a crossing bisect_crossing() found at t with: gradient_at(t),
+/// unless the field there does not change along `dir` the way it does across the crossing
+/// (the secant or rounding put t across a kink, on a plateau's side, where the gradient
+/// vanishes or belongs to the flat cell: a 0/1 mask at an isovalue just above 0); then the
+/// gradient at whichever end of the last bracket does, the far end first. gradient_at returns
+/// the gradient per unit of the coordinates `dir` is the ray's direction in.
+template <typename GradientAt>
+Vec3d crossing_gradient(GradientAt&& gradient_at, double t, const CrossingBracket& bracket, const Vec3d& dir) {
+  const double rising = bracket.gb > bracket.ga ? 1.0 : -1.0;
+  const Vec3d g = gradient_at(t);
+  if (rising * dot(g, dir) > 0 || bracket.a == bracket.b) return g;
+  for (double end : {bracket.b, bracket.a}) {
+    if (end == t) continue;
+    const Vec3d ge = gradient_at(end);
+    if (rising * dot(ge, dir) > 0) return ge;
+  }
+  return g;
 }
 
 /// @brief Largest value of g on [0, length] and where it is (the first place, on ties).

@@ -95,8 +95,8 @@ TfTable::TfTable(const TransferFunction& tf, double step_voxels, int size) {
     tf.eval(v, c, a);
     entries_[size_t(i)] = {c.x, c.y, c.z, float(1 - std::pow(1 - double(a), step_voxels))};
   }
-  lo_ = float(lo);
-  scale_ = n > 1 ? float(double(n - 1) / (hi - lo)) : 0.0f;
+  lo_ = lo;
+  scale_ = n > 1 ? double(n - 1) / (hi - lo) : 0.0;
   last_ = float(n - 1);
 }
 

@@ -56,8 +56,10 @@ class TfTable {
   /// @param step_voxels the sampling step: opacity a becomes 1 - (1 - a)^step.
   TfTable(const TransferFunction& tf, double step_voxels, int size = 4096);
   void lookup(float v, Vec3f& color, float& alpha) const {
-    float x = (v - lo_) * scale_;
-    x = x > 0 ? (x < last_ ? x : last_) : 0;  // NaN becomes 0
+    // In double: a table over denormal values (a span of 1e-40 has a scale past the largest
+    // float) or near the largest float (v - lo overflows) still finds its entry.
+    const double xd = (double(v) - lo_) * scale_;
+    const float x = xd > 0 ? (xd < last_ ? float(xd) : last_) : 0;  // NaN becomes 0
     const int i = int(x);
     const int j = i + 1 < int(entries_.size()) ? i + 1 : i;
     const float f = x - float(i);
@@ -72,7 +74,8 @@ class TfTable {
     float r, g, b, a;
   };
   std::vector<Entry> entries_;
-  float lo_ = 0, scale_ = 0, last_ = 0;
+  double lo_ = 0, scale_ = 0;
+  float last_ = 0;
 };
 
 }  // namespace brickyard

@@ -258,6 +258,16 @@ void Tracer<Voxel>::enter(PathNode& q, Levels& lv) {
   q.brick = nullptr;
   if (q.node.has_brick()) {
     q.brick = r.brick(q.node.brick()), q.group_distances = r.group_distances(q.node.brick());
+    const int64_t e = r.m_ + 2;
+    for (int a = 0; a < 3; ++a) {
+      int64_t lo = 0, hi = e - 1;  // the sponge's: the whole brick
+      if (size_t(q.depth) < r.level_dims_.size()) {
+        const int64_t base = q.c[a] * r.m_ - 1;  // level voxel p is at brick coordinate p - base
+        lo = std::clamp<int64_t>(-base, 0, e - 1), hi = std::clamp<int64_t>(r.level_dims_[size_t(q.depth)][a] - 1 - base, lo, e - 1);
+      }
+      q.inside_lo[a] = float(lo), q.inside_hi[a] = float(hi);
+      q.cell_hi[a] = int32_t(std::min(std::max(hi - 1, lo), e - 2));
+    }
     q.differences = r.search_hidden_crossings_ ? &r.brick_differences_of(q.node.brick()) : nullptr;
     lv.push(q);
   }

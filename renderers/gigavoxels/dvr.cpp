@@ -423,8 +423,8 @@ void Tracer<Voxel>::run_lighting(const RunPositions& at, int n, const PrimaryRay
   for (int a = 0; a < 3; ++a)
     for (int k = 0; k < L; ++k) world[a][k] = ln.gradient[a][k] * r.unit_gradient_to_world_[a];
   r.shading_.lighting_of_gradients(world, ray_light, ray_half, ln.diffuse, ln.specular);
-  // Zero gradients have no lighting; the rest are lit as lighting_at would light them
-  // but for a gradient too small or too large to normalise, or a sample at the eye.
+  // Lit as lighting_at would light them, but for a zero gradient (facing the ray, as the
+  // reference takes it), one too small or too large to normalise, or a sample at the eye.
   bool any_falls_back = false;
   bool falls_back[L];
   for (int k = 0; k < n; ++k) {
@@ -435,7 +435,7 @@ void Tracer<Voxel>::run_lighting(const RunPositions& at, int n, const PrimaryRay
   for (int k = 0; any_falls_back && k < n; ++k) {
     if (!falls_back[k]) continue;
     const Vec3d g(ln.gradient[0][k], ln.gradient[1][k], ln.gradient[2][k]);
-    const ShadingModel::Lighting l = ln.normal[k] ? lighting_at(at.tk[k], g, ray) : ShadingModel::Lighting{};
+    const ShadingModel::Lighting l = lighting_at(at.tk[k], g, ray);
     counters.gradients -= ln.normal[k];  // counted below, as for every lane
     ln.diffuse[k] = l.diffuse, ln.specular[k] = l.specular;
   }
@@ -489,18 +489,18 @@ bool Tracer<Voxel>::composite_run(RayState& s, PixelResult& px, const RunPositio
 }
 
 /// brick_cell for kRunLanes points of brick b at brick coordinates x, side by side: their
-/// cells c (clamped as brick_cell clamps; NaN: 0), the positions uf in them, and the cells'
+/// cells c (clamped as brick_cell clamps; NaN: the low end), the positions uf in them, and the cells'
 /// corners.
 template <typename Voxel>
 void Tracer<Voxel>::cells_and_corners(const PathNode& b, const LaneFloats (&x)[3], LaneInts (&c)[3], LaneFloats (&uf)[3],
                                       LaneFloats (&corner)[8]) const {
   constexpr int L = kRunLanes;
   const int32_t e = r.m_ + 2;
-  const LaneFloats cell_top = LaneFloats{} + float(e - 1);
-  const LaneInts last_cell = LaneInts{} + (e - 2);
   LaneInts offset = {};
   for (int a = 2; a >= 0; --a) {
-    const LaneFloats clamped = x[a] > 0.0f ? (x[a] < cell_top ? x[a] : cell_top) : LaneFloats{};
+    const LaneFloats inside_lo = LaneFloats{} + b.inside_lo[a], inside_hi = LaneFloats{} + b.inside_hi[a];
+    const LaneInts last_cell = LaneInts{} + b.cell_hi[a];
+    const LaneFloats clamped = x[a] > inside_lo ? (x[a] < inside_hi ? x[a] : inside_hi) : inside_lo;
     c[a] = __builtin_convertvector(clamped, LaneInts);
     c[a] = c[a] < last_cell ? c[a] : last_cell;
     uf[a] = clamped - __builtin_convertvector(c[a], LaneFloats);
@@ -573,8 +573,7 @@ void Tracer<Voxel>::lighting_between(const PathNode& b, const int32_t (&cell)[3]
     const double length2 = world[0][k] * world[0][k] + world[1][k] * world[1][k] + world[2][k] * world[2][k];
     const double t_middle = (k == 0 ? prev_t : tk[k - 1]) + double(fraction[k]) * (tk[k] - (k == 0 ? prev_t : tk[k - 1]));
     if (normal[k] && length2 > 0 && length2 < kInf && t_middle > 0) continue;
-    const ShadingModel::Lighting l =
-        normal[k] ? lighting_at(t_middle, Vec3d(gradient[0][k], gradient[1][k], gradient[2][k]), ray) : ShadingModel::Lighting{};
+    const ShadingModel::Lighting l = lighting_at(t_middle, Vec3d(gradient[0][k], gradient[1][k], gradient[2][k]), ray);
     counters.gradients -= normal[k];  // counted where used, as for every lane
     diffuse[k] = l.diffuse, specular[k] = l.specular;
   }
@@ -590,17 +589,20 @@ ShadingModel::Lighting Tracer<Voxel>::across_faces(const ShadingModel::Lighting&
           f.first * front.specular + between * middle.specular + after * back.specular};
 }
 
-/// Whether a sample's gradient (per unit coordinate) gives it a normal: a zero gradient
-/// gives none, and so the ambient term alone.
+/// Whether a sample's gradient (per unit coordinate) is one: not zero (counted as a gradient
+/// taken; a zero one is a flat region, which normal_of turns to face the ray).
 template <typename Voxel>
 bool Tracer<Voxel>::has_normal(const Vec3d& gradient) const {
   return gradients && (gradient.x != 0 || gradient.y != 0 || gradient.z != 0);
 }
 
-/// The normal of a sample's gradient (zero where it has none), facing the ray.
+/// The normal of a sample's gradient, facing the ray; the ray's reverse where the gradient
+/// vanishes (a constant region, a mask's inside), as the reference's facing_normal takes it:
+/// lit as a surface facing the eye, not left to the ambient term alone. Zero where the frame
+/// computes no gradients.
 template <typename Voxel>
 Vec3d Tracer<Voxel>::normal_of(const Vec3d& gradient, const PrimaryRay& ray) const {
-  return has_normal(gradient) ? facing_normal(gradient * r.unit_gradient_to_world_, ray.world.dir) : Vec3d(0.0);
+  return gradients ? facing_normal(gradient * r.unit_gradient_to_world_, ray.world.dir) : Vec3d(0.0);
 }
 
 /// The lighting at t for the field's gradient there.
@@ -623,7 +625,7 @@ ShadingModel::Lighting Tracer<Voxel>::lighting_at(double t, const Vec3d& gradien
 }
 
 /// DVR: integrates the segment from the previous sample to t, where the value is v and the
-/// gradient g (zero: ambient light alone at that end), `voxels` finest voxels long. Shaded
+/// gradient g (zero: a flat end, lit facing the ray), `voxels` finest voxels long. Shaded
 /// with its ends' lighting, weighted by the cell faces between them where both lie in one
 /// brick (prev_at and at of `lattice`: face_crossings), the cells between its first and
 /// last faces lit at their middle (middle_lighting) or by the ends' mean; else their mean (the back end's alone is
@@ -719,7 +721,7 @@ bool Tracer<Voxel>::dvr_constant(float v, RayState& s, PixelResult& px, const No
   Vec3f col;
   float a;
   r.preintegrated_.segment(v, v, to_voxels(t_end - t_from, unit_per_t), col, a);
-  composite(s, px, col, a, t_from, ShadingModel::Lighting{}, Vec3d(0.0), ray);  // no gradient: ambient light
+  composite(s, px, col, a, t_from, lighting_at(t_from, Vec3d(0.0), ray), Vec3d(0.0), ray);  // flat: facing the ray
   if (s.alpha >= stop) return true;
   s.start_segment(v, t_end);
   return false;

@@ -204,13 +204,14 @@ double Tracer<Voxel>::refine_hit(const Levels& lv, double lambda, double t0, dou
     const double g0 = v0 - surface.value, g1 = v1 - surface.value;
     if (!((g0 < 0) != (g1 < 0) || g1 == 0)) continue;
     const double iso = surface.value;
+    CrossingBracket bracket;
     const double th = bisect_crossing(
         [&](double m) {
           ++counters.samples;
           return double(sample(lv, lambda, m, nullptr)) - iso;
         },
-        t0, t1, g0, g1, steps);
-    if (!found || th < best) best = th, hit_surface = int(&surface - r.scene_.isosurfaces.data()), found = true;
+        t0, t1, g0, g1, steps, &bracket);
+    if (!found || th < best) best = th, hit_surface = int(&surface - r.scene_.isosurfaces.data()), hit_bracket = bracket, found = true;
   }
   hit_levels = lv;
   hit_lambda = lambda;
@@ -227,7 +228,13 @@ void Tracer<Voxel>::finish_iso(const PrimaryRay& ray, double hit_t, PixelResult&
   if (!gradients) return;
   Vec3d g(0.0);
   if (hit_levels.count > 0) {
-    sample(hit_levels, hit_lambda, hit_t, &g);
+    g = crossing_gradient(
+        [&](double u) {
+          Vec3d gu;
+          sample(hit_levels, hit_lambda, u, &gu);
+          return gu;
+        },
+        hit_t, hit_bracket, ray.dir);
   } else if (face_axis >= 0) {
     g[face_axis] = ray.dir[face_axis] > 0 ? 1.0 : -1.0;  // the value rises into the region entered
   }

@@ -26,6 +26,7 @@
 
 #include "core/camera.h"
 #include "renderers/common/cell_accessor.h"
+#include "renderers/common/cubic.h"
 #include "renderers/common/pixel.h"
 #include "renderers/gigavoxels/face_lighting.h"
 #include "renderers/gigavoxels/renderer.h"
@@ -92,6 +93,10 @@ struct Tracer {
     const uint8_t* group_distances = nullptr;  // per cell group (cell_groups.h)
     const BrickDifferences* differences = nullptr;  // set_brick_bounds
     Levels levels;  // the last 3 bricks down to and including this node's
+    // The level's voxel centres within the brick, in brick coordinates, and the last cell
+    // between them (enter()): samples clamp to them, as the reference clamps to the volume.
+    float inside_lo[3] = {}, inside_hi[3] = {};
+    int32_t cell_hi[3] = {};
     bool contains(double t) const {
       for (int a = 0; a < 3; ++a) {
         const double u = frame.eye[a] + frame.dir[a] * t;
@@ -101,14 +106,17 @@ struct Tracer {
     }
   };
 
-  /// The cell of brick b at brick coordinates l (voxel i + 1 at i; clamped into the brick):
-  /// its corner values c, where in it l lies (u), and its lower corner.
+  /// The cell of brick b at brick coordinates l (voxel i + 1 at i; clamped to the level's
+  /// voxel centres in the brick, and to the cells between them): its corner values c, where
+  /// in it l lies (u), and its lower corner. Past the volume's faces the border only repeats
+  /// the face's voxels: a cell reaching into it has no gradient across the face, and a
+  /// sample rounded a hair outside (a ray grazing the face) was shaded from a normal lying
+  /// in the face.
   void brick_cell(const PathNode& b, const Vec3f& l, int64_t cell[3], float u[3], float c[8]) const {
     const int64_t e = r.m_ + 2;
-    const float top = float(e - 1);
     for (int a = 0; a < 3; ++a) {
-      const float x = l[a] > 0 ? std::min(l[a], top) : 0.0f;  // NaN: 0 (std::clamp keeps it)
-      cell[a] = std::min<int64_t>(int64_t(x), e - 2);
+      const float x = l[a] > b.inside_lo[a] ? std::min(l[a], b.inside_hi[a]) : b.inside_lo[a];  // NaN: the low end
+      cell[a] = std::min<int64_t>(int64_t(x), b.cell_hi[a]);
       u[a] = x - float(cell[a]);
     }
     const Voxel* q = cell_voxels(b, cell);
@@ -485,6 +493,7 @@ struct Tracer {
   int face_axis = -1;
   Levels hit_levels;
   double hit_lambda = 0;
+  CrossingBracket hit_bracket;  // refine_hit's last bracket, for the normal (crossing_gradient)
 };
 
 }  // namespace brickyard::gigavoxels

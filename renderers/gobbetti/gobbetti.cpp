@@ -419,22 +419,29 @@ class GobbettiRenderer final : public Renderer {
     /// A data leaf's brick as the ray sees it: the ray in the brick's local coordinates
     /// (level voxels, apron included), l(t) = lo + ld t, sampled in single precision with the
     /// last cell's corners kept (coherent steps usually stay in a cell).
+    ///
+    /// Points are clamped to the level's voxel centres (inside, first and last), as the
+    /// reference clamps them, and cells to those between them: past the volume's faces the
+    /// apron only repeats the face's voxels, so a cell reaching into it has no gradient across
+    /// the face, and a ray entering there (a point rounded a hair outside) was shaded from a
+    /// normal lying in the face.
     struct Brick {
       const Stored* data = nullptr;
       int level = 0;
       int64_t e = 0;
       float inv_scale = 1;  // 1 / 2^steps: finest -> level voxels
       float lo[3] = {}, ld[3] = {};
+      float inside_lo[3] = {}, inside_hi[3] = {};  // the level's voxel centres, local
+      int64_t cell_lo[3] = {}, cell_hi[3] = {};    // the cells between them
       mutable int64_t cached = -1;
       mutable float c[8] = {};
 
       float sample(double t, Vec3d* gradient = nullptr) const {
         int64_t cell[3];
         float u[3];
-        const float top = float(e - 1);
         for (int a = 0; a < 3; ++a) {
-          const float l = std::clamp(lo[a] + ld[a] * float(t), 0.0f, top);
-          cell[a] = std::min<int64_t>(int64_t(l), e - 2);
+          const float l = std::clamp(lo[a] + ld[a] * float(t), inside_lo[a], inside_hi[a]);
+          cell[a] = std::clamp<int64_t>(int64_t(l), cell_lo[a], cell_hi[a]);
           u[a] = l - float(cell[a]);
         }
         const int64_t index = (cell[2] * e + cell[1]) * e + cell[0];
@@ -457,10 +464,14 @@ class GobbettiRenderer final : public Renderer {
       b.e = r.E_;
       const double inv_scale = 1.0 / double(int64_t(1) << r.layout_.steps(b.level));
       b.inv_scale = float(inv_scale);
+      const Vec3s level_dims = r.layout_.level_dims(b.level);
       for (int a = 0; a < 3; ++a) {
-        const double offset = double(leaf.key.coords()[a]) * double(r.M_) - double(r.A_);
-        b.lo[a] = float((ray.org[a] + 0.5) * inv_scale - 0.5 - offset);
+        const int64_t offset = leaf.key.coords()[a] * r.M_ - r.A_;
+        b.lo[a] = float((ray.org[a] + 0.5) * inv_scale - 0.5 - double(offset));
         b.ld[a] = float(ray.dir[a] * inv_scale);
+        const int64_t first = std::max<int64_t>(-offset, 0), last = std::min<int64_t>(level_dims[a] - 1 - offset, b.e - 1);
+        b.inside_lo[a] = float(first), b.inside_hi[a] = float(last);
+        b.cell_lo[a] = first, b.cell_hi[a] = std::max(first, last - 1);
       }
       return b;
     }
@@ -493,6 +504,7 @@ class GobbettiRenderer final : public Renderer {
       double hit_t = kInf;
       int hit_s = -1;
       Brick hit_brick;
+      CrossingBracket hit_bracket{hit_t, hit_t, 0, 0};  // a hit not bisected is taken where it is
       r.index_.traverse(ray.org, ray.dir, ray.span.t0, ray.span.t1, [&](const gobbetti::LeafVisit& leaf) {
         ++counters.nodes;
         if (leaf.outside || leaf.payload == kEmptyLeaf) {
@@ -530,16 +542,17 @@ class GobbettiRenderer final : public Renderer {
           for (size_t s = 0; s < surfaces.size(); ++s) {
             const double g = v - surfaces[s].value;
             if (!have_prev && g == 0) {  // the ray starts on the surface (or re-enters data on it)
-              if (t < hit_t) hit_t = t, hit_s = int(s), hit_brick = b;
+              if (t < hit_t) hit_t = t, hit_s = int(s), hit_brick = b, hit_bracket = {t, t, 0, 0};
             } else if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
               const double iso = surfaces[s].value;
+              CrossingBracket bracket;
               const double th = bisect_crossing(
                   [&](double m) {
                     ++counters.samples;
                     return b.sample(m) - iso;
                   },
-                  prev_t, t, prev[s], g, r.p_.refine);
-              if (th < hit_t) hit_t = th, hit_s = int(s), hit_brick = b;
+                  prev_t, t, prev[s], g, r.p_.refine, &bracket);
+              if (th < hit_t) hit_t = th, hit_s = int(s), hit_brick = b, hit_bracket = bracket;
             }
             prev[s] = g;
           }
@@ -557,7 +570,15 @@ class GobbettiRenderer final : public Renderer {
       px.color = surfaces[size_t(hit_s)].color;
       if (!gradients) return;
       Vec3d g(0.0);
-      if (hit_brick.data) hit_brick.sample(hit_t, &g);
+      if (hit_brick.data) {
+        g = crossing_gradient(
+            [&](double u) {
+              Vec3d gu;
+              hit_brick.sample(u, &gu);
+              return gu;
+            },
+            hit_t, hit_bracket, ray.dir);
+      }
       const Vec3d n = shade_normal(g, ray.world.dir);
       if (setup.outputs.normals) px.normal = n;
       if (!r.shading_.lit()) return;

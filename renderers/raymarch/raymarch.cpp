@@ -65,6 +65,7 @@ class RaymarchRenderer final : public Renderer {
     RayCounters& counters;
     TrilinearSampler<Stored, float> sampler;
     const bool gradients;
+    CrossingBracket hit_bracket;  // the last bracket of crossing()'s hit
 
     Marcher(const RaymarchRenderer& renderer, const FrameSetup& s, RayCounters& c)
         : r(renderer), setup(s), rays(s.camera, s.width, s.height), counters(c), sampler(r.ctx_.bricks(), c, r.finest_), gradients(r.ctx_.needs_gradients(s.outputs)) {}
@@ -156,9 +157,10 @@ class RaymarchRenderer final : public Renderer {
           const float g = v - float(surfaces[s].value);
           if (have_prev && ((prev[s] < 0) != (g < 0) || g == 0)) {
             const float iso = float(surfaces[s].value);
+            CrossingBracket bracket;
             const double th = bisect_crossing([&](double m) { return sample(o, d, m) - iso; }, t_prev, t, prev[s], g,
-                                              r.p_.refine);
-            if (th < hit_t) hit_t = th, hit_s = int(s);
+                                              r.p_.refine, &bracket);
+            if (th < hit_t) hit_t = th, hit_s = int(s), hit_bracket = bracket;
           }
           prev[s] = g;
         }
@@ -183,7 +185,9 @@ class RaymarchRenderer final : public Renderer {
       alpha = 1;
       color = r.scene_.isosurfaces[size_t(s)].color;
       if (!gradients) return;
-      const Vec3d n = facing_normal(gradient_world(o + d * t), world_ray.dir);
+      // (The world gradient's rate along the world ray has the voxel one's sign.)
+      const Vec3d g = crossing_gradient([&](double u) { return gradient_world(o + d * u); }, t, hit_bracket, world_ray.dir);
+      const Vec3d n = facing_normal(g, world_ray.dir);
       if (setup.outputs.normals) normal = n;
       if (!r.shading_.lit()) return;
       const Vec3d p_world = world_ray.at(t);

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cfloat>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -244,6 +245,24 @@ TEST(Builder, ClampRangeAndConstantTolerance) {
   auto source2 = make_field_source(make_field("sphere"), {32, 32, 32}, ValueType::u8);
   build_store(*source2, dir.file("t"), loose);
   EXPECT_EQ(Store(dir.file("t")).record_count(), 0u);  // everything within tolerance
+}
+
+TEST(Builder, WarnsOfValueRangesSinglePrecisionHandlesBadly) {
+  // The build succeeds, and says what the renderers will make of such values.
+  EXPECT_TRUE(value_range_warnings(-1e30, 1e30).empty());
+  EXPECT_TRUE(value_range_warnings(0, 0).empty());
+  EXPECT_TRUE(value_range_warnings(-1e-30, 1e-30).empty());
+  const std::vector<std::string> huge = value_range_warnings(-0.6 * double(FLT_MAX), 0.1);
+  ASSERT_EQ(huge.size(), 1u);
+  EXPECT_NE(huge[0].find("within a factor of 2 of the largest float"), std::string::npos) << huge[0];
+  EXPECT_EQ(value_range_warnings(0, 0.5 * double(FLT_MAX)).size(), 1u);
+  const std::vector<std::string> tiny = value_range_warnings(-1e-40, 2e-40);
+  ASSERT_EQ(tiny.size(), 1u);
+  EXPECT_NE(tiny[0].find("denormal"), std::string::npos) << tiny[0];
+  // Through a build: the values of a store reach them.
+  testing::TempDir dir;
+  auto source = make_field_source(make_field("sphere"), {9, 9, 9}, ValueType::f32);
+  EXPECT_TRUE(build_store(*source, dir.file("plain.store"), {}).warnings.empty());
 }
 
 TEST(Builder, ResultDoesNotDependOnThreadCount) {

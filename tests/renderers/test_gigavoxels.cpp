@@ -222,8 +222,9 @@ TEST_F(GigaVoxels, MiddleLightingLowersLitDvrErrorWhereSegmentsCrossSeveralCells
   // A segment that crosses two cell faces or more passes cells where the ray takes no sample;
   // face_lighting alone lights them with its ends' mean. middle_lighting takes one more
   // gradient, in their middle, and lights them with it: the error falls most where segments
-  // are longest (here 0.0150 -> 0.0113 at step 1, 0.0064 -> 0.0051 at step 0.5 under a
-  // headlight). One at a time and in sample runs alike.
+  // are longest (here 0.0134 -> 0.0114 at step 1, 0.0054 -> 0.0047 at step 0.5 under a
+  // headlight; the ends' mean was 0.0150 and 0.0064 before samples were clamped to the
+  // volume's voxels and flat ones lit as facing the ray). One at a time and in sample runs alike.
   const Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.25, "termination_opacity": 0.999}, "shading": {"light": "headlight"})", 64);
   const FrameBuffers truth = reference_frame(sc);
   const auto render = [&](double step, bool middle, bool runs) {
@@ -235,7 +236,7 @@ TEST_F(GigaVoxels, MiddleLightingLowersLitDvrErrorWhereSegmentsCrossSeveralCells
     EXPECT_TRUE(all_finite(fb));
     return std::pair{compare_frames(fb, truth, 1.0).rmse, st.counters};
   };
-  for (const auto& [step, most] : {std::pair{1.0, 0.8}, std::pair{0.5, 0.88}})
+  for (const auto& [step, most] : {std::pair{1.0, 0.88}, std::pair{0.5, 0.92}})
     for (const bool runs : {false, true}) {
       const auto [ends, ends_counters] = render(step, false, runs);
       const auto [middle, middle_counters] = render(step, true, runs);

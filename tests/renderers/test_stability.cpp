@@ -9,7 +9,7 @@
 // trilinear interpolant, which is known in closed form for the fields used here (sums of
 // per-axis functions, so the interpolant is piecewise linear along any ray).
 //
-// Volumes come from in-memory arrays (ArraySource below) with unit spacing and origin 0, so
+// Volumes come from in-memory arrays (ArraySource, array_scene.h) with unit spacing and origin 0, so
 // world, voxel and camera coordinates coincide; frames are rendered with world-space cameras
 // (RenderSession::render of a FrameSetup), which also reaches volumes whose box is flat
 // (normalised camera coordinates cannot place a camera beside a volume of zero extent). Scenes
@@ -36,6 +36,7 @@
 #include "session/grid_cache.h"
 #include "preprocess/volume_source.h"
 #include "session/render_session.h"
+#include "array_scene.h"
 #include "shared_suite.h"
 #include "storage/store.h"
 #include "test_util.h"
@@ -45,28 +46,13 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 using testing::backends_for;
+using testing::build_array;
+using testing::expect_sane;
+using testing::look;
+using testing::make_scene;
+using testing::render_world;
+using testing::Rendered;
 constexpr RenderMode kModes[] = {RenderMode::iso, RenderMode::dvr, RenderMode::mip};
-
-/// An f32 volume held in memory.
-class ArraySource final : public VolumeSource {
- public:
-  ArraySource(const Vec3s& dims, std::vector<float> values) : dims_(dims), values_(std::move(values)) {
-    BY_CHECK(int64_t(values_.size()) == volume(dims_));
-  }
-  std::string name() const override { return "array"; }
-  Vec3s dims() const override { return dims_; }
-  ValueType type() const override { return ValueType::f32; }
-  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
-    const size_t slice = size_t(dims_.x * dims_.y);
-    BY_CHECK(out.size() == size_t(z1 - z0) * slice * sizeof(float));
-    std::memcpy(out.data(), values_.data() + size_t(z0) * slice, out.size());
-  }
-  std::string describe_json() const override { return R"({"kind":"array"})"; }
-
- private:
-  Vec3s dims_;
-  std::vector<float> values_;
-};
 
 /// A field that is a sum of per-axis functions of the lattice index: its trilinear interpolant
 /// is the sum of the per-axis linear interpolants, exact and piecewise linear along any ray,
@@ -155,85 +141,6 @@ struct SeparableField {
     return kInf;
   }
 };
-
-std::string build_array(const testing::TempDir& dir, const std::string& name, const Vec3s& dims, std::vector<float> v,
-                        int brick_size = 8) {
-  ArraySource src(dims, std::move(v));
-  BuildOptions o;
-  o.brick_size = brick_size;
-  build_store(src, dir.file(name), o);
-  build_octree(dir.file(name), {});  // for the back ends that read an octree volume
-  return dir.file(name);
-}
-
-Scene make_scene(const std::string& dataset, const std::string& backend, RenderMode mode, int size) {
-  Scene s;
-  s.dataset = dataset;
-  s.backend = backend;
-  s.mode = mode;
-  s.camera.keyframes = {Camera{}};
-  s.width = s.height = s.camera.width = s.camera.height = size;
-  s.background = Vec3f(0.1f, 0.2f, 0.3f);
-  s.cache.l1_bytes = uint64_t(8) << 20;
-  s.cache.l2_bytes = uint64_t(8) << 20;
-  s.cache.loader_threads = 1;
-  s.quality.lod_ratio = 0.01;  // full resolution for level-of-detail back ends
-  return s;
-}
-
-Camera look(const Vec3d& eye, const Vec3d& target, const Vec3d& up = Vec3d(0, 0, 1), double fov = 30) {
-  Camera c;
-  c.eye = eye;
-  c.target = target;
-  c.up = up;
-  c.fov_degrees = fov;
-  return c;
-}
-
-struct Rendered {
-  FrameBuffers fb;
-  FrameStats stats;
-  CacheStats cache;
-  Camera camera;  // world space
-  Box3d world;
-};
-
-/// Renders `scene`'s converged frame with a camera in world coordinates.
-Rendered render_world(const Scene& scene, const Camera& camera) {
-  RenderSession session(scene);
-  FrameSetup setup = session.setup(0, FrameOutputs{.depth = true, .normals = true});
-  setup.camera = camera;
-  Rendered r;
-  r.stats = testing::render_settled(session, setup, r.fb);
-  r.cache = session.pages().stats();
-  r.camera = camera;
-  r.world = session.context().geometry().world;
-  return r;
-}
-
-/// Every pixel finite and in range: colour and alpha in [0, 1], depth a distance or +inf,
-/// normals unit (or zero where there is none). Returns the number of pixels drawn (alpha > 0).
-int expect_sane(const FrameBuffers& fb, const std::string& what) {
-  int covered = 0, bad = 0;
-  for (int y = 0; y < fb.height(); ++y)
-    for (int x = 0; x < fb.width(); ++x) {
-      const Rgbaf c = fb.color(x, y);
-      const float depth = fb.depth(x, y);
-      const Vec3f n = fb.normal(x, y);
-      bool ok = true;
-      for (float v : {c.r, c.g, c.b, c.a}) ok = ok && std::isfinite(v) && v >= -1e-6f && v <= 1 + 1e-5f;
-      ok = ok && !std::isnan(depth) && depth >= 0;
-      ok = ok && std::isfinite(n.x) && std::isfinite(n.y) && std::isfinite(n.z);
-      const float len = length(n);
-      ok = ok && (len == 0 || std::fabs(len - 1) < 1e-4f);
-      if (c.a > 0) ++covered;
-      if (!ok && bad++ < 5)
-        ADD_FAILURE() << what << ": pixel (" << x << ", " << y << ") colour " << c.r << " " << c.g << " " << c.b << " "
-                      << c.a << " depth " << depth << " normal " << n;
-    }
-  EXPECT_EQ(bad, 0) << what;
-  return covered;
-}
 
 /// Compares an iso frame with the exact crossings of a separable field. The reference must
 /// agree everywhere: the same pixels hit (touching included), depths within rounding. Raymarch,
