@@ -46,6 +46,7 @@ std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const Fl
   const GridView& grid = cache.grid();
   const GridLayout& layout = grid.layout();
   const NodeTable& nodes = grid.nodes();
+  const int coarsest = layout.coarsest_resolving();
   struct Chosen {
     BrickKey key;
     double distance;
@@ -68,7 +69,8 @@ std::vector<FlightFrame> fly(BrickCache& cache, const CameraPath& path, const Fl
       if (n.is_constant()) continue;  // renderers integrate constant nodes analytically
       const double d = distance(box, cam.eye);
       const double pixels = grid.brick_voxel_pixels(cam, k, box, path.height);
-      if (pixels <= options.lod_ratio || int(k.level) == layout.finest()) {
+      // As the renderers refine: never stopping at a level that has collapsed an axis.
+      if ((pixels <= options.lod_ratio && int(k.level) >= coarsest) || int(k.level) == layout.finest()) {
         chosen.push_back({k, d, float(pixels)});
         continue;
       }

@@ -10,6 +10,17 @@ namespace {
 int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
 }  // namespace
 
+int resolving_steps(const Vec3s& dims) {
+  int s = 0;
+  for (;; ++s) {
+    if (s >= 62) return s;  // every axis is down to one voxel long before
+    bool resolves = true;
+    for (int a = 0; a < 3; ++a)
+      resolves = resolves && ceil_div(dims[a], int64_t(1) << (s + 1)) >= std::min(dims[a], kResolvingVoxels);
+    if (!resolves) return s;
+  }
+}
+
 GridLayout GridLayout::make(const Vec3s& dims, int brick_size) {
   if (dims.x < 1 || dims.y < 1 || dims.z < 1)
     throw Error(Errc::invalid_argument, fmt::format("volume {}x{}x{} is empty", dims.x, dims.y, dims.z)).with_field("dims");
@@ -33,6 +44,8 @@ GridLayout GridLayout::make(const Vec3s& dims, int brick_size) {
         .with_field("dims");
   return l;
 }
+
+int GridLayout::coarsest_resolving() const { return std::max(0, finest() - resolving_steps(dims)); }
 
 Vec3s GridLayout::level_dims(int level) const {
   const int s = steps(level);

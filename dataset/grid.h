@@ -11,6 +11,12 @@
 /// dimension (rounding up) until one brick covers the whole volume at level 0. Coarse voxel i
 /// of a level k steps above the finest is the box-filtered average of the 2^k finest voxels
 /// starting at i * 2^k, so it is centred at finest coordinate (i + 0.5) * 2^k - 0.5.
+///
+/// Halving every axis alike collapses the short axes of a very anisotropic grid long before
+/// the long one reaches a brick (3x3x300 has levels 2x2x150 and 1x1x75; 1000x37x51 has
+/// 63x3x4 and 32x2x2): such a level no longer holds the data across its short axes, however
+/// small its voxels look on screen. Level-of-detail back ends use only the levels that still
+/// resolve every axis (resolving_steps, GridLayout::coarsest_resolving).
 
 #include <cstdint>
 #include <vector>
@@ -23,6 +29,19 @@
 
 namespace brickyard {
 
+/// @brief Voxels a coarser level must keep across an axis to stand in for the finest level
+/// there (or all the finest level has, where that is fewer). Modelled on an ellipsoid filling
+/// a 1000x37x51 grid, seen along each short axis: a level with 10 and 13 voxels across them
+/// loses 2-3% of the silhouette's pixels, one with 5 and 7 loses 10-24%, 3 and 4 40-70%, 2
+/// all of it; a 64^3 sphere loses as much at 8^3 as 1000x37x51 at 10 across. Rendered
+/// (test_stiff_lod.cpp), 800x20x26 at its coarsest allowed level, 400x10x13, loses 6 of 129.
+inline constexpr int64_t kResolvingVoxels = 8;
+
+/// @brief The most halvings (ceil(dims / 2^s) per axis, as GridLayout and OctreeLayout halve)
+/// after which every axis of a grid of `dims` keeps at least min(dims, kResolvingVoxels)
+/// voxels: 0 for 3x3x300 (its first halving leaves 2 across), 2 for 1000x37x51.
+int resolving_steps(const Vec3s& dims);
+
 struct GridLayout {
   Vec3s dims{0};       ///< finest level, in voxels
   int brick_size = 32; ///< M
@@ -34,6 +53,9 @@ struct GridLayout {
   int finest() const { return levels - 1; }
   /// @brief Halving steps from the finest level: 0 at the finest level.
   int steps(int level) const { return finest() - level; }
+  /// @brief The coarsest level that still resolves every axis (resolving_steps): level-of-detail
+  /// back ends go no coarser, whatever the footprint allows. 0 for a grid whose level 0 does.
+  int coarsest_resolving() const;
   Vec3s level_dims(int level) const;
   Vec3s level_bricks(int level) const;
   int64_t brick_count(int level) const { return volume(level_bricks(level)); }

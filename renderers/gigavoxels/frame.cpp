@@ -41,6 +41,13 @@ GigaVoxelsRenderer<Voxel>::GigaVoxelsRenderer(const RenderContext& ctx, const Gi
   } else {
     extent_ = double(layout.brick_size) * double(int64_t(1) << layout.finest()), unit_offset_ = 0.5;
   }
+  // A store's levels halve every axis alike, so on a very anisotropic one the coarse levels
+  // have collapsed its short axes (3x3x300: 2x2x150, 1x1x75, ...) and hold nothing of the data
+  // across them: footprints go no coarser than the voxels of the coarsest depth that resolves
+  // every axis, so that neither a descent nor a sample's level or step goes past it (a node
+  // above it asks to be subdivided). A power of two, so a descent stops exactly at that depth.
+  if (p.source != 1)
+    if (const int d = layout.coarsest_resolving(); d > 0) max_footprint_ = 1.0 / (double(m_) * double(int64_t(1) << d));
   scales_ = node_scales(n_, source_->max_depth() + 1);
   for (const Scale& sc : scales_) inv_scales_.push_back(1.0 / sc.hi);
   if (p.source == 1) outside_value_ = 0.0f;

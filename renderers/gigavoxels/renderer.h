@@ -8,7 +8,10 @@
 ///
 /// Per ray: from the volume's entry point, kd-restart descent from the root at every new
 /// position, stopping at the node whose voxels match the ray's cone footprint there (a voxel
-/// covers at most lod_ratio pixels), collecting the bricks of the last 3 levels met. Constant
+/// covers at most lod_ratio pixels), collecting the bricks of the last 3 levels met. The
+/// footprint is no coarser than the voxels of the coarsest level that still resolves every
+/// axis (dataset/grid.h): on a very anisotropic store the coarse levels have collapsed its
+/// short axes to a voxel or two, and are never used. Constant
 /// nodes are integrated in closed form; brick nodes are marched with a step and a mip level
 /// chosen from the footprint, blending the two nearest levels (quadrilinear filtering). A node
 /// that should be finer asks to be subdivided, a node without its brick asks for it (at most one
@@ -219,6 +222,9 @@ class GigaVoxelsRenderer final : public Renderer {
   double lod_ratio_ = 1, extent_ = 1, step_ = 0.5, finest_voxel_unit_ = 1;
   Vec3d unit_gradient_to_world_{1.0};  // a gradient per unit-cube length to one per world length
   double footprint_per_t_ = 0;  // a pixel's footprint per unit distance, unit coordinates, times lod_ratio
+  // The largest footprint (unit coordinates): the voxel of the coarsest depth whose level still
+  // resolves every axis of the store (GridLayout::coarsest_resolving); infinite where level 0 does.
+  double max_footprint_ = kInf;
   double inv_log2_arity_ = 1;
   int n_ = 2, m_ = 32;
   double inv_m_ = 1.0 / 32;

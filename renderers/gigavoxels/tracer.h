@@ -314,8 +314,10 @@ struct Tracer {
     return iso ? !crossing(coarse_voxel, voxel) : same_hidden_interval(coarse_voxel, voxel);
   }
 
-  /// A pixel's footprint at distance t, in unit coordinates, scaled by lod_ratio.
-  double footprint(double t) const { return std::max(t, 1e-300) * r.footprint_per_t_; }
+  /// A pixel's footprint at distance t, in unit coordinates, scaled by lod_ratio, and no
+  /// larger than the voxels of the coarsest depth that resolves every axis (max_footprint_):
+  /// the descent, the levels a sample blends and the step all follow it.
+  double footprint(double t) const { return std::min(std::max(t, 1e-300) * r.footprint_per_t_, r.max_footprint_); }
   /// The (fractional) depth whose voxels are as large as a footprint. Per sample wherever
   /// the footprint is coarser than the finest level met, so the log is inlined (log2_fast:
   /// the double log was a tenth of the amplified flight's time, frexp and a float log2 still

@@ -6,7 +6,9 @@
 //   1. Refine a cut of the brick octree from the root, largest projected voxel first. Leaves
 //      are nodes that are empty for this scene (isovalue outside the node's range, zero opacity
 //      by the transfer function's summed-area table), outside the frustum, adequate (a voxel
-//      covers at most lod_ratio pixels), occluded in the last query (visibility feedback), or
+//      covers at most lod_ratio pixels, at a level that still resolves every axis: on a very
+//      anisotropic grid the coarse levels have collapsed its short axes, dataset/grid.h),
+//      occluded in the last query (visibility feedback), or
 //      whose children are not resident yet: then requests are posted (within the per-frame
 //      upload budget) and refinement goes on elsewhere; it never waits. The cut never holds
 //      more data leaves than the L1 pool has slots.
@@ -75,6 +77,7 @@ class GobbettiRenderer final : public Renderer {
   GobbettiRenderer(const RenderContext& ctx, const GobbettiParams& p)
       : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), layout_(ctx.layout()), p_(p), shading_(scene_.shading, geo_) {
     lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
+    coarsest_level_ = layout_.coarsest_resolving();
     clip_world_ = Box3d(geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi));
     M_ = layout_.brick_size;
     A_ = ctx.bricks().shape().apron;
@@ -243,7 +246,9 @@ class GobbettiRenderer final : public Renderer {
     while (!queue.empty()) {
       const Candidate n = queue.top();
       queue.pop();
-      const bool wants = int(n.key.level) < layout_.finest() && n.pixels > lod_ratio_;
+      // A level above coarsest_level_ is refined however small its voxels look: it has
+      // collapsed an axis (a 3x3x300 grid's 1x1x75 level drew nothing).
+      const bool wants = int(n.key.level) < layout_.finest() && (n.pixels > lod_ratio_ || int(n.key.level) < coarsest_level_);
       if (!wants) {
         add_leaf(n.key, NodeUse::data, n.handle);
         continue;
@@ -671,6 +676,7 @@ class GobbettiRenderer final : public Renderer {
   GobbettiParams p_;
   ShadingModel shading_;
   double lod_ratio_ = 1;
+  int coarsest_level_ = 0;  // the coarsest level that resolves every axis (GridLayout::coarsest_resolving)
   Box3d clip_world_;  // the rendered region in world coordinates
   int64_t M_ = 32, A_ = 1, E_ = 34;
   std::vector<double> step_by_level_;   // sampling step per level, finest voxels

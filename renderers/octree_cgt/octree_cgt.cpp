@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "core/error.h"
+#include "dataset/grid.h"
 #include "renderers/octree_cgt/renderer.h"
 #include "renderers/octree_cgt/tracer.h"
 
@@ -70,8 +71,12 @@ void Shared::plan_frame(const FrameSetup& setup) {
   lod = p.multires && p.dpdv > 0;
   lod_k.assign(size_t(layout.depth), std::numeric_limits<double>::infinity());
   shadow_lod_k = lod_k;
+  // A level coarser than the grid's resolving steps (dataset/grid.h) has collapsed a short
+  // axis of a very anisotropic grid: it is never drawn (its transition slice stays infinite).
+  const int coarsest = resolving_steps(layout.dims);
   if (lod)
     for (int d = 0; d < layout.depth; ++d) {
+      if (layout.level_of_depth(d) > coarsest) continue;
       const double voxel = double(int64_t(1) << layout.level_of_depth(d)) * geo.voxel_size;
       lod_k[size_t(d)] = voxel / (p.dpdv * pixel_angle) * fk / geo.spacing[K];
       shadow_lod_k[size_t(d)] = lod_k[size_t(d)] / p.shadow_dpdv;
