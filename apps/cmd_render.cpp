@@ -119,6 +119,7 @@ void run_render(const RenderOptions& o) {
     fs::create_directories(o.error_maps);
   }
   nlohmann::json all = nlohmann::json::array();
+  int below_quality = 0;  // frames delivered below the quality asked (FrameStats::below_quality)
   for (int f : frames) {
     FrameBuffers fb;
     // A still camera shows the converged image (asynchronous back ends refine over frames as
@@ -145,6 +146,9 @@ void run_render(const RenderOptions& o) {
                                err.rmse, err.ssim, err.depth_p99, err.coverage_mismatch);
     }
     all.push_back(j);
+    // Said once a run on the terminal (each frame's reason is in --stats), then counted.
+    if (!stats.below_quality.empty() && below_quality++ == 0)
+      std::cerr << fmt::format("brickyard: warning: frame {} is below the quality asked: {}\n", f, stats.below_quality);
     std::cout << fmt::format("frame {}: {} {}x{} in {} ({} rays/s on {} threads, {} samples, {} bricks, {} requests){}\n", f,
                              session.backend().name, stats.width, stats.height, format_duration(stats.seconds),
                              format_count(stats.seconds > 0 ? double(stats.counters.rays) / stats.seconds : 0),
@@ -168,6 +172,7 @@ void run_render(const RenderOptions& o) {
     if (settle > 0)
       std::cout << fmt::format(", {:.1f} frames {} per frame", settle / n,
                                scene.has_path ? "to converge" : "to settle (each completed at once where the back end can)");
+    if (below_quality > 0) std::cout << fmt::format(", {} of them below the quality asked", below_quality);
     std::cout << "\n";
     if (!sums.empty()) {
       std::string line;
@@ -181,6 +186,7 @@ void run_render(const RenderOptions& o) {
     j["backend"] = session.backend().name;
     j["params"] = session.params().values();
     j["frames"] = all;
+    j["frames_below_quality"] = below_quality;
     j["cache"] = nlohmann::json::parse(session.pages().stats().to_json());
     write_text(o.stats, j.dump(2) + "\n");
   }

@@ -28,10 +28,12 @@ uint64_t mix(uint64_t k) {
 }  // namespace
 
 HostCache::HostCache(uint64_t budget, uint64_t entry_bytes, const std::string& policy) : budget_(budget) {
-  if (budget < entry_bytes)
-    throw Error(Errc::invalid_argument, fmt::format("the L2 budget of {} is smaller than one decoded page ({})",
-                                                    format_bytes(double(budget)), format_bytes(double(entry_bytes))))
+  if (budget < entry_bytes) {
+    const auto [given, page] = format_bytes_apart(budget, entry_bytes);
+    throw Error(Errc::invalid_argument, fmt::format("the L2 budget of {} is smaller than one decoded page ({}){}", given, page,
+                                                    budget == 0 ? ": the L2 holds at least one, it cannot be turned off" : ""))
         .with_field("l2_bytes");
+  }
   uint32_t n = 1;
   while (n < 16 && budget / (uint64_t(n) * 2) >= 16 * entry_bytes) n *= 2;
   for (uint32_t s = 0; s < n; ++s) {

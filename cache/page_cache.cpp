@@ -36,11 +36,12 @@ size_t stripe_of_this_thread() { return thread_stripe(kStripes); }
 
 uint32_t slots_for(const KindBudget& b, RecordKind kind, size_t page_bytes) {
   const uint64_t slots = b.l1_slots ? b.l1_slots : b.l1_bytes / page_bytes;
-  if (slots == 0)
-    throw Error(Errc::invalid_argument, fmt::format("the L1 budget of {} is smaller than one {} ({})",
-                                                    format_bytes(double(b.l1_bytes)), kind == RecordKind::brick ? "brick" : to_string(kind),
-                                                    format_bytes(double(page_bytes))))
+  if (slots == 0) {
+    const auto [budget, page] = format_bytes_apart(b.l1_bytes, page_bytes);
+    throw Error(Errc::invalid_argument, fmt::format("the L1 budget of {} is smaller than one {} ({})", budget,
+                                                    kind == RecordKind::brick ? "brick" : to_string(kind), page))
         .with_field("l1_bytes");
+  }
   if (slots > UINT32_MAX / 2) throw Error(Errc::invalid_argument, "too many L1 slots").with_field("l1_slots");
   return uint32_t(slots);
 }

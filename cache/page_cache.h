@@ -57,8 +57,9 @@ struct CacheConfig {
   uint64_t upload_bytes_per_frame = 0;   ///< 0: unlimited
   std::string trace_path;                ///< record every access to this file (brickyard format)
   /// The part of the L1 budget that a back end's own brick pool holds beside this cache's L1
-  /// (share_l1_budget); 0: none, the cache's L1 is the whole budget.
-  uint64_t backend_pool_bytes = 0;
+  /// (share_l1_budget), 0 where the budget leaves it nothing; unset: not shared, the cache's L1
+  /// is the whole budget.
+  std::optional<uint64_t> backend_pool_bytes;
   /// A source of one record kind gives it the budgets above. A source of several gives each
   /// kind listed here its own budget, and shares l1_bytes and l2_bytes equally among the rest
   /// (l1_slots, when set, applies to each of them).

@@ -28,6 +28,12 @@ std::string format_bytes(double bytes) {
   return fmt::format("{:.3g} {}", v, prefixes[i]);
 }
 
+std::pair<std::string, std::string> format_bytes_apart(uint64_t a, uint64_t b) {
+  std::string fa = format_bytes(double(a)), fb = format_bytes(double(b));
+  if (a != b && fa == fb) fa = fmt::format("{} bytes", a), fb = fmt::format("{} bytes", b);
+  return {fa, fb};
+}
+
 std::string format_duration(double seconds) {
   if (!std::isfinite(seconds)) return "?";
   if (seconds < 1e-3) return fmt::format("{:.1f} us", seconds * 1e6);
@@ -39,7 +45,7 @@ std::string format_duration(double seconds) {
   return fmt::format("{}:{:02}", m, s);
 }
 
-uint64_t parse_bytes(std::string_view text, std::string_view field) {
+uint64_t parse_bytes(std::string_view text, std::string_view field, bool allow_zero) {
   size_t digits = 0;
   while (digits < text.size() && (std::isdigit(static_cast<unsigned char>(text[digits])) || text[digits] == '.')) ++digits;
   double v = 0;
@@ -51,7 +57,7 @@ uint64_t parse_bytes(std::string_view text, std::string_view field) {
   else if (unit == "MiB" || unit == "MB" || unit == "M") scale = 1024.0 * 1024;
   else if (unit == "GiB" || unit == "GB" || unit == "G") scale = 1024.0 * 1024 * 1024;
   else if (unit == "TiB" || unit == "TB" || unit == "T") scale = 1024.0 * 1024 * 1024 * 1024;
-  if (digits == 0 || ec != std::errc() || ptr != text.data() + digits || scale == 0 || v <= 0)
+  if (digits == 0 || ec != std::errc() || ptr != text.data() + digits || scale == 0 || (v <= 0 && !allow_zero))
     throw Error(Errc::invalid_argument, fmt::format("'{}' is not a size such as 64MiB", text)).with_field(field);
   return uint64_t(v * scale);
 }

@@ -21,7 +21,7 @@ CacheConfig share_l1_budget(CacheConfig c, size_t brick_bytes, const BackendInfo
   const uint64_t staging = info.l1_staging_slots ? info.l1_staging_slots(params) : 0;
   const uint64_t budget_slots = c.l1_slots ? c.l1_slots : c.l1_bytes / brick_bytes;
   if (staging == 0 || budget_slots == 0) return c;  // not shared; a budget under one brick is the cache's error
-  c.l1_slots = uint32_t(std::clamp<uint64_t>(staging, 1, std::max<uint64_t>(budget_slots / 4, 1)));
+  c.l1_slots = uint32_t(l1_staging_share(staging, budget_slots));
   c.l1_bytes = uint64_t(c.l1_slots) * brick_bytes;
   c.backend_pool_bytes = (budget_slots - c.l1_slots) * brick_bytes;
   c.l1_policy = "lru";  // a brick staged last is copied next: the policy under study is the back end's own pool's
@@ -128,7 +128,15 @@ void RenderSession::build_cache() {
     if (std::find(reads.begin(), reads.end(), k.kind) == reads.end() && !config.kinds.count(k.kind))
       config.kinds[k.kind] = KindBudget{1, k.page_bytes, k.page_bytes};
   if (dataset.has_grid()) config = share_l1_budget(config, dataset.grid().shape().bytes(), entry_->info, params_);
-  pages_ = std::make_unique<PageCache>(*store_, config);
+  try {
+    pages_ = std::make_unique<PageCache>(*store_, config);
+  } catch (const Error& e) {
+    // A budget the scene gave that cannot hold one page is the scene's key to fix; a
+    // configuration the caller gave (Options::cache) stays the caller's.
+    const bool l1 = e.field() == "l1_bytes", l2 = e.field() == "l2_bytes";
+    if (options_.cache || !(l1 || l2)) throw;
+    throw Error(e.code(), e.message()).with_file(scene_.file).with_field(l1 ? "cache.l1" : "cache.l2");
+  }
   if (dataset.has_grid()) bricks_ = std::make_unique<BrickCache>(*pages_, dataset.grid());
   if (context_) context_->rebind_cache(*pages_, bricks_.get());
   else context_ = std::make_unique<RenderContext>(scene_, dataset, *pages_, bricks_.get());

@@ -44,6 +44,10 @@ void FrameStats::add_phase(const std::string& name, double s) {
   phases.push_back({name, s});
 }
 
+void FrameStats::add_below_quality(const std::string& reason) {
+  below_quality += (below_quality.empty() ? "" : "; ") + reason;
+}
+
 FrameBuffers resolve_supersampled(const FrameBuffers& fine, int factor) {
   BY_CHECK(factor >= 1 && factor % 2 == 1);
   BY_CHECK(fine.width() % factor == 0 && fine.height() % factor == 0);
@@ -83,6 +87,7 @@ std::string FrameStats::to_json() const {
   nlohmann::ordered_json be = nlohmann::ordered_json::object();
   for (const auto& [name, value] : backend) be[name] = value;
   j["backend"] = be;
+  j["below_quality"] = below_quality.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(below_quality);
   const RayCounters& c = counters;
   j["rays"] = c.rays;
   j["samples"] = c.samples;

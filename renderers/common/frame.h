@@ -85,10 +85,17 @@ struct FrameStats {
 
   /// Figures particular to the back end (working set, index size, culled nodes), by name.
   std::vector<std::pair<std::string, double>> backend;
+  /// Why the frame was delivered below the quality the scene asked for, empty when it was not:
+  /// what the back end ran short of that more frames will not bring (a pool too small for the
+  /// cut it wants, exact mode out of passes). A frame still refining as its data arrives is not
+  /// below it. Reasons are joined by "; ".
+  std::string below_quality;
 
   double phase(const std::string& name) const;
   double backend_value(const std::string& name) const;
   void add_phase(const std::string& name, double seconds);
+  /// @brief Adds a reason to below_quality.
+  void add_below_quality(const std::string& reason);
   std::string to_json() const;
 };
 

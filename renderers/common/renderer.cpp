@@ -77,9 +77,13 @@ const RenderContext::ValueSpan& RenderContext::range_below(const BrickKey& k) co
   return ranges_below_[k.level][size_t(layout().linear_index(k))];
 }
 
+uint64_t l1_staging_share(uint64_t staging, uint64_t budget_slots) {
+  return std::clamp<uint64_t>(staging, 1, std::max<uint64_t>(budget_slots / 4, 1));
+}
+
 uint64_t RenderContext::backend_pool_bytes() const {
   const CacheConfig& c = pages_->config();
-  return c.backend_pool_bytes ? c.backend_pool_bytes : c.l1_bytes;
+  return c.backend_pool_bytes.value_or(c.l1_bytes);
 }
 
 RenderContext::RenderContext(const Scene& scene, const Dataset& dataset, PageCache& pages, BrickCache* bricks)

@@ -68,6 +68,12 @@ struct BackendInfo {
   bool accepts(DataKind kind, RenderMode mode) const;
 };
 
+/// @brief The slots the cache's L1 keeps of an L1 budget of `budget_slots` bricks shared with a
+/// back end's own pool (BackendInfo::l1_staging_slots): the `staging` slots asked for, at most a
+/// quarter of the budget and at least one. The pool has the rest (share_l1_budget; a back end
+/// naming the least budget it can work with counts the same way).
+uint64_t l1_staging_share(uint64_t staging, uint64_t budget_slots);
+
 /// @brief Resolved parameter values of one back end: every declared parameter, by name.
 class BackendParams {
  public:

@@ -61,13 +61,15 @@ Vec3f colour(JsonObjectReader& r, std::string_view key, Vec3f fallback) {
   return Vec3f(c);
 }
 
+/// A cache budget: a size or a number of bytes, 0 included. Whether it holds a page of the
+/// store is the session's to say, which knows the page's size and names this key.
 uint64_t bytes(JsonObjectReader& r, std::string_view key, uint64_t fallback) {
   const nlohmann::json* j = r.get(key);
   if (!j) return fallback;
-  if (j->is_number_unsigned() && j->get<uint64_t>() > 0) return j->get<uint64_t>();
-  if (!j->is_string()) throw r.error(key, "expected a size such as \"256MiB\" or a positive number of bytes");
+  if (j->is_number_unsigned()) return j->get<uint64_t>();
+  if (!j->is_string()) throw r.error(key, "expected a size such as \"256MiB\" or a number of bytes");
   try {
-    return parse_bytes(j->get<std::string>(), r.path(key));
+    return parse_bytes(j->get<std::string>(), r.path(key), /*allow_zero=*/true);
   } catch (Error& e) {
     throw e.with_file(r.file());
   }

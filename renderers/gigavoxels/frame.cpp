@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "core/timing.h"
+#include "core/units.h"
 #include "renderers/gigavoxels/renderer.h"
 
 namespace brickyard::gigavoxels {
@@ -69,6 +70,8 @@ void GigaVoxelsRenderer<Voxel>::begin_frame(const FrameSetup& setup) {
   ++frame_;
   passes_ = 0;
   interrupted_ = 0;
+  rays_cut_short_ = 0;
+  out_of_passes_ = false;
   frame_subdivisions_ = frame_uploads_ = 0;
   frame_requests_ = frame_uses_ = 0;
   produced_before_ = source_->produced(), loaded_before_ = source_->loaded();
@@ -104,7 +107,11 @@ bool GigaVoxelsRenderer<Voxel>::another_pass() {
   for (const RayState& s : states_) interrupted_ += s.status == RayState::interrupted;
   if (interrupted_ == 0) return false;
   // A pass that served nothing cannot make progress: the rest of the frame takes coarser data.
-  if (last_pass_progress_ == 0 || passes_ >= uint64_t(p_.max_passes)) allow_interrupt_ = false;
+  if (allow_interrupt_ && (last_pass_progress_ == 0 || passes_ >= uint64_t(p_.max_passes))) {
+    allow_interrupt_ = false;
+    rays_cut_short_ = interrupted_;
+    out_of_passes_ = last_pass_progress_ != 0;
+  }
   uses_->begin_frame(frame_);
   tree_.begin_feedback(frame_);
   return true;
@@ -133,6 +140,17 @@ void GigaVoxelsRenderer<Voxel>::add_statistics(FrameStats& stats) const {
                    {"leaps_chained", double(leaps_chained_.load(std::memory_order_relaxed))},
                    {"failed_allocations", double(tree_.counters().failed_allocations - failed_before_)},
                    {"loader_ms", loader_seconds_ * 1e3}};
+  // Below the quality asked: what was refused for want of room in the pools, and exact mode's
+  // rays that stopped waiting (a frame still refining as bricks arrive is not).
+  if (const uint64_t refused = tree_.counters().failed_allocations - failed_before_)
+    stats.add_below_quality(fmt::format("gigavoxels' pools held back refinement: allocations refused {} times, all {} brick "
+                                        "slots or all {} node blocks in use this frame (cache.l1)",
+                                        refused, tree_.brick_capacity(), tree_.block_capacity()));
+  if (rays_cut_short_)
+    stats.add_below_quality(fmt::format("gigavoxels' exact mode {}: rays that took coarser data: {}",
+                                        out_of_passes_ ? fmt::format("ran out of passes (max_passes {})", p_.max_passes)
+                                                       : std::string("could serve nothing more"),
+                                        rays_cut_short_));
 }
 
 // --- sizes ----------------------------------------------------------------------------------
@@ -140,7 +158,25 @@ void GigaVoxelsRenderer<Voxel>::add_statistics(FrameStats& stats) const {
 template <typename Voxel>
 uint32_t GigaVoxelsRenderer<Voxel>::brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s) {
   if (p.brick_slots) return p.brick_slots;
-  return uint32_t(std::clamp<uint64_t>(ctx.backend_pool_bytes() / slot_bytes(s.brick_size(), keeps_differences(ctx, p)), 8, 1u << 20));
+  const uint64_t slot = slot_bytes(s.brick_size(), keeps_differences(ctx, p));
+  const uint64_t slots = ctx.backend_pool_bytes() / slot;
+  if (slots >= kMinBrickSlots) return uint32_t(std::min<uint64_t>(slots, 1u << 20));
+  // Too small: the least L1 budget, in the cache's bricks, whose share leaves the pool
+  // kMinBrickSlots (share_l1_budget; unshared, the pool has the whole budget).
+  const CacheConfig& c = ctx.pages().config();
+  const uint64_t brick_bytes = ctx.bricks().shape().bytes();
+  const bool shared = c.backend_pool_bytes.has_value();
+  const uint64_t staging = l1_staging_slots(p);
+  const auto pool_slots = [&](uint64_t n) { return (n - (shared ? l1_staging_share(staging, n) : 0)) * brick_bytes / slot; };
+  uint64_t least = 1;
+  while (pool_slots(least) < kMinBrickSlots) ++least;
+  const uint64_t given = shared ? uint64_t(c.l1_slots) * brick_bytes + *c.backend_pool_bytes : c.l1_bytes;
+  throw Error(Errc::invalid_argument,
+              fmt::format("gigavoxels needs an L1 of at least {} bricks ({}) for a brick pool of {} slots{}: cache.l1 holds {} ({})",
+                          least, format_bytes(double(least * brick_bytes)), kMinBrickSlots,
+                          shared ? " beside the cache's staging slots" : "", given / brick_bytes, format_bytes(double(given))))
+      .with_file(ctx.scene().file)
+      .with_field("cache.l1");
 }
 
 template <typename Voxel>

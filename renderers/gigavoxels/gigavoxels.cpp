@@ -80,11 +80,7 @@ BackendEntry gigavoxels_backend() {
   // (StoreSource's request budget), so none it asked for leaves the cache's L1 before it is
   // copied; the amplified store's coarse sampler reads through L1 too, beside them; the sponge
   // reads no stored brick. A pool sized by hand (brick_slots) leaves the cache the whole budget.
-  e.info.l1_staging_slots = [](const BackendParams& p) -> uint32_t {
-    if (p["brick_slots"] != 0) return 0;
-    if (p["source"] == 1) return 1;
-    return uint32_t(2 * p["upload_budget"]) + (p["source"] == 2 ? gigavoxels::kCoarseSamplerSlots : 0);
-  };
+  e.info.l1_staging_slots = [](const BackendParams& p) { return gigavoxels::l1_staging_slots(gigavoxels_params().bind(p)); };
   e.create = [](const RenderContext& ctx, const BackendParams& p) -> std::unique_ptr<Renderer> {
     const GigaVoxelsParams gp = gigavoxels_params().bind(p);
     std::unique_ptr<gigavoxels::Source> source = gigavoxels::make_source(ctx, gp);

@@ -96,6 +96,21 @@ struct GigaVoxelsParams {
   bool leap_chains{};          // DVR at one level: leaps follow each other with no sample between (chain_leaps)
 };
 
+/// @brief The cache's L1 slots the loader stages its copies through when the brick pool shares
+/// the L1 budget (BackendInfo::l1_staging_slots): a pass's loads beside the last pass's, the
+/// amplified store's coarse sampler beside them; one for the sponge, which reads no stored
+/// brick. 0 for a pool sized by hand (brick_slots), which leaves the cache the whole budget.
+inline uint32_t l1_staging_slots(const GigaVoxelsParams& p) {
+  if (p.brick_slots != 0) return 0;
+  if (p.source == 1) return 1;
+  return uint32_t(2 * p.upload_budget) + (p.source == 2 ? kCoarseSamplerSlots : 0);
+}
+
+/// @brief The fewest brick slots a pool sized from the L1 budget may have: the root's and a
+/// few to refine into. A budget that leaves the pool fewer is refused, naming the L1 that
+/// gives it these, rather than a pool allocated past the budget.
+inline constexpr uint32_t kMinBrickSlots = 8;
+
 /// N^depth, as an unevaluated sum hi + lo of two doubles: exact while N^depth < 2^106 (the
 /// integer fits 64 bits up to 3^40 and 2^63).
 struct Scale {
@@ -170,6 +185,8 @@ class GigaVoxelsRenderer final : public Renderer {
   // Sizes and constants, fixed at construction (frame.cpp).
   /// The brick pool: what the L1 budget holds once the cache's L1 has the slots the loader
   /// stages its copies through (l1_staging_slots), with each slot's bounds.
+  /// @throws Error(invalid_argument) naming cache.l1 and the least L1 that gives the pool
+  /// kMinBrickSlots, for a budget that gives it fewer.
   static uint32_t brick_slots(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s);
   static uint32_t node_blocks(const RenderContext& ctx, const GigaVoxelsParams& p, const Source& s);
   static uint64_t slot_bytes(int m, bool with_differences);
@@ -266,6 +283,10 @@ class GigaVoxelsRenderer final : public Renderer {
   CompactionReport compaction_;
   uint64_t passes_ = 0, interrupted_ = 0, frame_subdivisions_ = 0, frame_uploads_ = 0, frame_requests_ = 0, frame_uses_ = 0;
   uint64_t last_pass_progress_ = 0, last_pass_requests_ = 0;
+  // Exact mode: the rays still waiting when the frame stopped interrupting them (passes used
+  // up, or a pass that served nothing), which took coarser data; and which of the two it was.
+  uint64_t rays_cut_short_ = 0;
+  bool out_of_passes_ = false;
   uint64_t produced_before_ = 0, loaded_before_ = 0, failed_before_ = 0;
   mutable std::atomic<uint64_t> samples_in_runs_{0};  // this frame's samples that sample_run took, added once per tile
   mutable std::atomic<uint64_t> leaps_chained_{0};    // this frame's leaps that chain_leaps took on, added once per tile

@@ -139,6 +139,10 @@ class GobbettiRenderer final : public Renderer {
                      {"refine_ms", refine_seconds_ * 1e3},
                      {"index_ms", index_seconds_ * 1e3},
                      {"visibility_ms", visibility_seconds_ * 1e3}};
+    if (pool_full_)  // the cut stops short of the level of detail asked for, however long it waits
+      stats.add_below_quality(fmt::format("gobbetti's cut was held back by the L1 pool: no room in its {} slots (cache.l1) to "
+                                          "refine {} of its nodes",
+                                          ctx_.bricks().pool_slots(), pool_full_));
   }
 
   bool converged() const override { return deferred_ == 0 || stalled_frames_ >= 3; }

@@ -126,6 +126,30 @@ TEST_F(CliRender, CameraPathFramesAreNumbered) {
   EXPECT_THAT(r.output, HasSubstr("0-2"));
 }
 
+TEST_F(CliRender, FramesBelowTheQualityAskedAreSaidOnceAndCounted) {
+  // gobbetti over an L1 of one brick (16^3 f32 with its apron: 23328 bytes): the cut stays at
+  // the root on every frame. The run still succeeds; the terminal says so once, the summary
+  // counts the frames, and --stats gives each frame's reason.
+  testing::TempDir out;
+  const std::string scene = write_scene("starved.json", R"("image": {"width": 48, "height": 32}, "quality": {"lod_ratio": 0.25},
+      "cache": {"l1": "23328"}, "camera_path": {"frames": 3, "keyframes": [{"eye": [1.8, -1.2, 1.4], "target": [0.5, 0.5, 0.5]},
+      {"eye": [-0.8, 1.8, 1.2], "target": [0.5, 0.5, 0.5]}]}, )" + kIso);
+  const auto r = brickyard("-q render " + scene + " --backend gobbetti --frames all --settle -o " + out.file("f.png") + " --stats " +
+                           out.file("s.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  size_t warnings = 0;
+  for (size_t at = r.output.find("is below the quality asked"); at != std::string::npos;
+       at = r.output.find("is below the quality asked", at + 1))
+    ++warnings;
+  EXPECT_EQ(warnings, 1u) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("brickyard: warning: frame 0 is below the quality asked: gobbetti's cut was held back by the L1 pool"));
+  EXPECT_THAT(r.output, HasSubstr("3 frames: "));
+  EXPECT_THAT(r.output, HasSubstr(", 3 of them below the quality asked"));
+  const nlohmann::json stats = nlohmann::json::parse(testing::read_file(out.file("s.json")));
+  EXPECT_EQ(stats["frames_below_quality"].get<int>(), 3);
+  for (const auto& f : stats["frames"]) EXPECT_TRUE(f["below_quality"].is_string()) << f.dump();
+}
+
 TEST_F(CliRender, MalformedScenesExitNonZeroNamingTheFileAndKeyAndWriteNothing) {
   testing::TempDir out;
   struct Bad {

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include <utility>
 
 #include "core/error.h"
 #include "core/units.h"
@@ -66,6 +67,23 @@ TEST(Units, HumanReadableNumbers) {
   EXPECT_EQ(format_duration(4.5), "4.50 s");
   EXPECT_EQ(format_duration(187), "3:07");
   EXPECT_EQ(format_duration(3723), "1:02:03");
+}
+
+TEST(Units, TwoByteCountsInOneMessageNeverReadAlike) {
+  // One byte short of a 32^3 f32 brick with its apron rounds to the brick's own "154 KiB".
+  using Pair = std::pair<std::string, std::string>;
+  EXPECT_EQ(format_bytes_apart(157215, 157216), (Pair{"157215 bytes", "157216 bytes"}));
+  EXPECT_EQ(format_bytes_apart(1024, 157216), (Pair{"1 KiB", "154 KiB"}));
+  EXPECT_EQ(format_bytes_apart(0, 157216), (Pair{"0 B", "154 KiB"}));
+  EXPECT_EQ(format_bytes_apart(2048, 2048), (Pair{"2 KiB", "2 KiB"}));
+}
+
+TEST(Units, ZeroBytesIsASizeOnlyWhereTheCallerAllowsIt) {
+  EXPECT_EQ(parse_bytes("0", "cache.l2", /*allow_zero=*/true), 0u);
+  EXPECT_EQ(parse_bytes("0MiB", "cache.l2", /*allow_zero=*/true), 0u);
+  EXPECT_EQ(parse_bytes("512KiB", "cache.l2", /*allow_zero=*/true), uint64_t(512) << 10);
+  EXPECT_THROW(parse_bytes("0", "--sizes"), Error);
+  EXPECT_THROW(parse_bytes("-1", "cache.l2", /*allow_zero=*/true), Error);
 }
 
 }  // namespace

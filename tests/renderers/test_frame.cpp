@@ -33,6 +33,15 @@ TEST(FrameStats, PhasesAccumulateByName) {
   EXPECT_NE(s.to_json().find("\"prepare\""), std::string::npos);
 }
 
+TEST(FrameStats, AFrameBelowTheQualityAskedSaysWhyInItsJson) {
+  FrameStats s;
+  EXPECT_NE(s.to_json().find("\"below_quality\": null"), std::string::npos) << s.to_json();
+  s.add_below_quality("a pool too small");
+  s.add_below_quality("out of passes");
+  EXPECT_EQ(s.below_quality, "a pool too small; out of passes");
+  EXPECT_NE(s.to_json().find("\"below_quality\": \"a pool too small; out of passes\""), std::string::npos) << s.to_json();
+}
+
 TEST(FrameBuffers, ResolvingSupersamplesAveragesColourAndKeepsTheCentreRaysDepthAndNormal) {
   // 2x1 pixels at factor 3: every sub-pixel's colour encodes its position, so the mean is
   // known; the middle sub-pixel (1, 1) of each block alone carries a finite depth and a normal.

@@ -13,10 +13,13 @@
 #include <random>
 #include <set>
 #include <string>
+#include <vector>
 
 #include <fmt/format.h>
 #include <tbb/global_control.h>
 
+#include "core/error.h"
+#include "core/units.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
 #include "renderers/common/cell_accessor.h"
@@ -26,6 +29,7 @@
 #include "renderers/common/scene.h"
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/field_bounds.h"
+#include "renderers/gigavoxels/renderer.h"
 #include "renderers/render_test_util.h"
 #include "test_util.h"
 
@@ -719,22 +723,67 @@ TEST_F(GigaVoxels, ABrickTheLoaderAskedForIsCopiedWhenItArrivesAndReadOnce) {
   EXPECT_LE(frames, int(bricks / budget * 2) + 12) << bricks << " bricks";
 }
 
-TEST_F(GigaVoxels, AnL1OfAFewBricksStillLoadsTheVolume) {
-  // The cache's L1 stages a quarter of its budget, at least one slot; the loader may then have
-  // one brick asked for at a time (half of one slot rounds to none, which would load nothing
-  // and call the empty image converged).
+TEST_F(GigaVoxels, AnL1TooSmallForItsPoolIsRefusedNamingTheLeastThatWorks) {
+  // The brick pool takes what the cache's L1 leaves of the budget, and needs kMinBrickSlots: a
+  // budget that leaves it fewer is refused before the first frame, naming the least L1 that
+  // does, instead of a pool allocated past the budget (8 slots over an L1 of one brick, once).
+  // At that least L1 the volume still loads: the cache's L1 stages a quarter of the budget,
+  // and the loader may have one brick asked for at a time (half of a few slots must not round
+  // to none, which would load nothing and call the empty image converged).
   Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.5})", 32);
   RenderSession probe(sc, backend_options("gigavoxels"));
-  sc.cache.l1_bytes = 6 * probe.bricks().shape().bytes();
+  const uint64_t brick = probe.bricks().shape().bytes();
+  uint64_t least = 0;
+  std::vector<std::string> refusals;
+  for (uint64_t n = 1; n < 64 && least == 0; ++n) {
+    sc.cache.l1_bytes = n * brick;
+    try {
+      RenderSession session(sc, backend_options("gigavoxels"));
+      least = n;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), Errc::invalid_argument) << e.what();
+      EXPECT_EQ(e.field(), "cache.l1") << e.what();
+      EXPECT_EQ(e.file(), dir_->file("scene.json")) << e.what();
+      EXPECT_NE(e.message().find(fmt::format("cache.l1 holds {} (", n)), std::string::npos) << e.what();
+      refusals.push_back(e.message());
+    }
+  }
+  ASSERT_GT(least, 1u) << "an L1 of one brick was accepted";
+  for (const std::string& m : refusals)
+    EXPECT_NE(m.find(fmt::format("gigavoxels needs an L1 of at least {} bricks ({})", least, format_bytes(double(least * brick)))),
+              std::string::npos)
+        << m;
+  sc.cache.l1_bytes = least * brick;
   RenderSession approx(sc, backend_options("gigavoxels"));
-  ASSERT_EQ(approx.bricks().pool_slots(), 1u);
+  EXPECT_EQ(approx.bricks().pool_slots(), std::max<uint64_t>(least / 4, 1));
   FrameBuffers fb;
   FrameStats st;
-  for (int frame = 0; frame < 12; ++frame) {
+  int held_back = 0;  // frames that said the pools held them back: the view wants far more than 8 bricks
+  for (int frame = 0; frame < 16; ++frame) {
     st = approx.render(0, fb, kAll);
     approx.bricks().wait_idle();
+    held_back += st.below_quality.find("gigavoxels' pools held back refinement") != std::string::npos;
   }
+  EXPECT_EQ(st.backend_value("brick_slots"), double(gigavoxels::kMinBrickSlots));
+  EXPECT_LE(double(approx.bricks().stats().l1_pool_bytes) + st.backend_value("brick_pool_bytes"), double(least * brick));
   EXPECT_EQ(st.backend_value("bricks_in_use"), st.backend_value("brick_slots")) << "the pool fills";
+  EXPECT_GT(held_back, 0);
+}
+
+TEST_F(GigaVoxels, AFrameBelowTheQualityAskedSaysWhy) {
+  // Exact mode with one pass: the first pass finds nothing loaded, and the rest of the frame
+  // takes coarser data. With its passes and an ample pool, the frame is as asked.
+  const Scene sc = scene(dvr_scene() + R"(, "quality": {"lod_ratio": 0.5})", 32);
+  FrameBuffers fb;
+  RenderSession one_pass(sc, backend_options("gigavoxels", {{"exact", 1}, {"max_passes", 1}}));
+  const FrameStats cut = one_pass.render(0, fb, kAll);
+  EXPECT_EQ(cut.backend_value("passes"), 2);
+  EXPECT_NE(cut.below_quality.find("gigavoxels' exact mode ran out of passes (max_passes 1)"), std::string::npos)
+      << cut.below_quality;
+  RenderSession exact(sc, backend_options("gigavoxels", {{"exact", 1}}));
+  const FrameStats full = exact.render(0, fb, kAll);
+  EXPECT_TRUE(exact.converged());
+  EXPECT_EQ(full.below_quality, "");
 }
 
 TEST_F(GigaVoxels, DifferenceNormalsAreTheReferencesOwn) {

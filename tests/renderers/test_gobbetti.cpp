@@ -115,6 +115,26 @@ TEST_F(Gobbetti, WorkingSetNeverExceedsThePoolAndASmallPoolDegradesWithoutHoles)
   EXPECT_LT(double(extra), 0.02 * fine_hits) << extra << " of " << fine_hits;
 }
 
+TEST_F(Gobbetti, ACutHeldBackByThePoolSaysSoInItsFrameStatistics) {
+  // An L1 of one brick holds the root and nothing to refine into: the cut stays at one leaf,
+  // as converged as this pool allows, and every frame says it is below the quality asked.
+  // With an ample pool, a settled frame is as asked.
+  RenderSession ample(scene(iso_scene()), backend_options("gobbetti"));
+  const uint64_t brick = ample.bricks().shape().bytes();
+  RenderSession starved(scene(iso_scene(), 64, std::to_string(brick)), backend_options("gobbetti"));
+  ASSERT_EQ(starved.bricks().pool_slots(), 1u);
+  EXPECT_LT(starved.settle(0, kAll, 20), 20);
+  FrameBuffers fb;
+  const FrameStats st = starved.render(0, fb, kAll);
+  EXPECT_EQ(st.backend_value("leaves"), 1);
+  EXPECT_GT(st.backend_value("pool_full_not_refined"), 0);
+  EXPECT_NE(st.below_quality.find("gobbetti's cut was held back by the L1 pool"), std::string::npos) << st.below_quality;
+  ample.settle(0, kAll);
+  const FrameStats fine = ample.render(0, fb, kAll);
+  EXPECT_GT(fine.backend_value("leaves"), 1);
+  EXPECT_EQ(fine.below_quality, "");
+}
+
 TEST_F(Gobbetti, VisibilityFeedbackNeverCullsWhatTheImageShows) {
   for (const std::string& mode : {iso_scene(), dvr_scene()}) {
     const Scene sc = scene(mode + R"(, "quality": {"lod_ratio": 0.5})", 96);

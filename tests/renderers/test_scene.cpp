@@ -223,6 +223,17 @@ TEST(Scene, DefaultsWhenOnlyTheRequiredKeysAreGiven) {
   EXPECT_TRUE(named.backend_params.empty());
 }
 
+TEST(Scene, CacheBudgetsAreByteCountsZeroIncluded) {
+  // Whether a budget holds one page of the store is the session's to judge (it knows the
+  // page's size and names the key): the scene reads any count of bytes, as a number or text.
+  const Scene s = parse_scene(scene_json(R"(, "cache": {"l1": 0, "l2": "0"})"), "s.json");
+  EXPECT_EQ(s.cache.l1_bytes, 0u);
+  EXPECT_EQ(s.cache.l2_bytes, 0u);
+  const Scene t = parse_scene(scene_json(R"(, "cache": {"l1": "157215", "l2": 157216})"), "s.json");
+  EXPECT_EQ(t.cache.l1_bytes, 157215u);
+  EXPECT_EQ(t.cache.l2_bytes, 157216u);
+}
+
 TEST(Scene, RelativeDatasetResolvesAgainstTheSceneFilesDirectory) {
   auto dataset_of = [](const std::string& dataset, const std::string& file) {
     return parse_scene(R"({"dataset": ")" + dataset + R"(", "camera": {"eye": [2, 0, 0], "target": [0, 0, 0]},

@@ -25,6 +25,7 @@ class Datasets : public ::testing::Test {
     BuildOptions o;
     o.brick_size = 8;
     build_store(*make_field_source(make_field("sphere"), {24, 24, 24}, ValueType::u8), dir_->file("sphere.store"), o);
+    build_store(*make_field_source(make_field("sphere"), {24, 24, 24}, ValueType::f32), dir_->file("sphere-f32.store"), o);
   }
   static void TearDownTestSuite() { delete dir_; }
 
@@ -151,6 +152,42 @@ TEST_F(Datasets, ABackEndAskingForAViewItsDatasetLacksIsRefusedBeforeTheFirstFra
     EXPECT_NE(err.message().find("no grid view"), std::string::npos) << err.what();
   }
   EXPECT_EQ(constructed, 0);
+}
+
+TEST_F(Datasets, ACacheBudgetBelowOnePageNamesTheScenesKeyAndThePage) {
+  // One byte short of a brick (8^3 f32 with its apron: 4000 bytes, "3.91 KiB" both) gives both
+  // in bytes. An L2 of 0 does not turn the L2 off: it is refused alike, with one decoded page.
+  const uint64_t brick = Store(dir_->file("sphere-f32.store")).format().bytes();
+  ASSERT_EQ(brick, 4000u);
+  struct Case {
+    uint64_t l1, l2;
+    std::string field, says;
+  };
+  for (const Case& c : {Case{brick - 1, 1 << 20, "cache.l1", "the L1 budget of 3999 bytes is smaller than one brick (4000 bytes)"},
+                        Case{1 << 20, 0, "cache.l2", "the L2 budget of 0 B is smaller than one decoded page (3.91 KiB)"}}) {
+    Scene s = scene("sphere-f32.store", "raymarch");
+    s.cache.l1_bytes = c.l1;
+    s.cache.l2_bytes = c.l2;
+    try {
+      RenderSession session(s);
+      ADD_FAILURE() << c.field << ": no error";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), Errc::invalid_argument) << e.what();
+      EXPECT_EQ(e.field(), c.field) << e.what();
+      EXPECT_EQ(e.file(), dir_->file("scene.json")) << e.what();
+      EXPECT_NE(e.message().find(c.says), std::string::npos) << e.what();
+    }
+  }
+  // A configuration the caller gave is the caller's: the cache's own field, no scene file.
+  RenderSession::Options o;
+  o.cache = cache_config(scene("sphere-f32.store", "raymarch"));
+  o.cache->l2_bytes = 0;
+  try {
+    RenderSession session(scene("sphere-f32.store", "raymarch"), o);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.field(), "l2_bytes") << e.what();
+  }
 }
 
 TEST_F(Datasets, ResetCacheKeepsTheContextAndStartsFromAnEmptyCache) {
