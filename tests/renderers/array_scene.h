@@ -21,14 +21,16 @@
 
 namespace brickyard::testing {
 
-/// An f32 volume held in memory.
+/// An f32 volume held in memory, its voxels `spacing` apart from the origin.
 class ArraySource final : public VolumeSource {
  public:
-  ArraySource(const Vec3s& dims, std::vector<float> values) : dims_(dims), values_(std::move(values)) {
+  ArraySource(const Vec3s& dims, std::vector<float> values, const Vec3d& spacing = Vec3d(1.0))
+      : dims_(dims), values_(std::move(values)), spacing_(spacing) {
     BY_CHECK(int64_t(values_.size()) == volume(dims_));
   }
   std::string name() const override { return "array"; }
   Vec3s dims() const override { return dims_; }
+  Vec3d spacing() const override { return spacing_; }
   ValueType type() const override { return ValueType::f32; }
   void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
     const size_t slice = size_t(dims_.x * dims_.y);
@@ -40,11 +42,12 @@ class ArraySource final : public VolumeSource {
  private:
   Vec3s dims_;
   std::vector<float> values_;
+  Vec3d spacing_;
 };
 
 inline std::string build_array(const TempDir& dir, const std::string& name, const Vec3s& dims, std::vector<float> v,
-                        int brick_size = 8) {
-  ArraySource src(dims, std::move(v));
+                               int brick_size = 8, const Vec3d& spacing = Vec3d(1.0)) {
+  ArraySource src(dims, std::move(v), spacing);
   BuildOptions o;
   o.brick_size = brick_size;
   build_store(src, dir.file(name), o);

@@ -21,6 +21,7 @@
 #include "renderers/common/metrics.h"
 #include "shared_suite.h"
 #include "test_util.h"
+#include "tet_test_util.h"
 
 namespace brickyard {
 namespace {
@@ -44,6 +45,7 @@ Compared against_reference(const Scene& scene, const Camera& camera) {
   c.test = render_world(scene, camera);
   Scene ref = scene;
   ref.backend = "reference";
+  ref.backend_params.clear();
   c.truth = render_world(ref, camera);
   c.e = compare_frames(c.test.fb, c.truth.fb, 1.0);  // unit spacing: world units are voxels
   return c;
@@ -200,6 +202,149 @@ TEST_F(Stiff, TransferFunctionsOverDenormalAndHugeRangesKeepTheirShape) {
       EXPECT_LT(c.e.rmse, 0.01) << what << " " << c.e.to_json();
     }
   }
+}
+
+/// The back ends' tolerances where they take the volume as a marcher does (a half-voxel step,
+/// raymarch and gobbetti), or solve or integrate it more exactly (the rest). gigavoxels lights
+/// a DVR segment from its ends: inside a visible plateau, where segments join flat samples and
+/// sloped ones, its error is first order in its step (0.0150, 0.0075, 0.0039 at steps 0.5,
+/// 0.25, 0.125 with the eye in the plateau), where the other views stay under 0.009.
+double view_tolerance(const std::string& backend, RenderMode mode) {
+  const bool marcher = backend == "raymarch" || backend == "gobbetti";
+  if (mode == RenderMode::iso) return marcher ? 0.03 : 0.015;
+  return marcher || backend == "gigavoxels" ? 0.02 : 0.015;
+}
+
+TEST_F(Stiff, DegenerateViewpointsMatchTheReference) {
+  // A ball's distance field, 1 past radius 12 (the cube's corners: constant bricks, a plateau),
+  // on 25^3 and on 25x25x7 voxels 4 apart in z (the same ball in world space): an isosurface
+  // at 0.6 and a lit transfer function over [0.3, 1]. Cameras on a face looking in, in a face's
+  // plane looking along it, along exact axes (with the up vector reversed, so that the ray
+  // directions' zero components are -0.0) and diagonals, inside the empty part of the volume,
+  // inside the surface and inside the plateau, and one whose central ray grazes the
+  // isosurface's silhouette. Every frame sane, and its error under the back end's tolerance.
+  const auto ball = [](const Vec3s& dims, const Vec3d& spacing) {
+    std::vector<float> v;
+    for (int64_t z = 0; z < dims.z; ++z)
+      for (int64_t y = 0; y < dims.y; ++y)
+        for (int64_t x = 0; x < dims.x; ++x) {
+          const Vec3d p = Vec3d(double(x), double(y), double(z)) * spacing - Vec3d(12.0);
+          v.push_back(float(std::min(length(p) / 12, 1.0)));
+        }
+    return v;
+  };
+  const std::vector<std::pair<std::string, std::string>> stores = {
+      {"ball", build_array(*dir_, "ball", {25, 25, 25}, ball({25, 25, 25}, Vec3d(1.0)))},
+      {"ball anisotropic", build_array(*dir_, "ball-aniso", {25, 25, 7}, ball({25, 25, 7}, {1, 1, 4}), 8, {1, 1, 4})}};
+  struct View {
+    const char* what;
+    Camera camera;
+  };
+  const std::vector<View> views = {
+      {"on the top face, looking in", look({12, 12, 24}, {12, 12, 0}, {0, 1, 0}, 60)},
+      {"in the top face's plane, looking along it", look({-10, 12, 24}, {30, 12, 24}, {0, 0, 1}, 60)},
+      {"along -y, up reversed", look({12, 45, 12}, {12, 0, 12}, {0, 0, -1}, 40)},
+      {"along +x through the centre", look({-30, 12, 12}, {12, 12, 12}, {0, 0, 1}, 40)},
+      {"along the diagonal", look({-10, -10, -10}, {12, 12, 12}, {0, 0, 1}, 45)},
+      {"inside the empty part", look({12, 12, 20.5}, {12, 12, 0}, {0, 1, 0}, 70)},
+      {"inside the surface", look({12.3, 11.8, 12.4}, {24, 24, 24}, {0, 0, 1}, 70)},
+      {"inside the plateau, a corner", look({1, 1, 1}, {12, 12, 12}, {0, 0, 1}, 60)},
+      {"grazing the silhouette", look({19.2, -40, 12}, {19.2, 12, 12}, {0, 0, 1}, 6)}};
+  for (const auto& [name, store] : stores)
+    for (RenderMode mode : {RenderMode::iso, RenderMode::dvr})
+      for (const std::string& backend : backends_for(mode)) {
+        if (backend == "reference") continue;
+        for (const View& v : views) {
+          Scene s = make_scene(store, backend, mode, 33);
+          s.shading.light = LightKind::headlight;
+          s.isosurfaces = {Isosurface{0.6}};
+          s.transfer_function = TransferFunction({{0.3, Vec3f(0.9f, 0.5f, 0.1f), 0.0f}, {1.0, Vec3f(0.2f, 0.6f, 1.0f), 0.15f}});
+          const Compared c = against_reference(s, v.camera);
+          const std::string what = backend + " " + std::string(to_string(mode)) + " " + name + ", " + v.what;
+          expect_sane(c.test.fb, what);
+          EXPECT_LT(c.e.rmse, view_tolerance(backend, mode)) << what << " " << c.e.to_json();
+        }
+      }
+}
+
+TEST_F(Stiff, TetrahedralMeshesFromDegenerateViewpointsMatchTheReference) {
+  // An unjittered lattice of Kuhn tets on [0, 1]^3 (faces on the axis planes and diagonals,
+  // so axis-aligned rays run along edges and through vertices) with f = min(x + y + z, 1.5)
+  // and f * 1e30: values at the vertices multiples of 1/6, and a plateau at 1.5 near the far
+  // corner. Isovalues equal to vertex values (0.5), just below the plateau (1.5 - 1e-4), and a
+  // generic one (0.8); cameras along an axis through vertices, on a boundary face looking in,
+  // inside the mesh, in the plateau, along the diagonal, grazing. Every tetrahedral back end
+  // against the tet reference. The isovalue of the plateau itself is ill-posed: a sane frame.
+  for (const double scale : {1.0, 1e30}) {
+    const std::string store = dir_->file("tets" + std::to_string(int(std::log10(scale))) + ".store");
+    testing::build(testing::lattice_mesh(6, 0.0, [&](const Vec3d& p) { return scale * std::min(p.x + p.y + p.z, 1.5); }), store, 64);
+    // Which rays lie in the mesh's face planes: through the central row and column of an
+    // image looking along an axis through the lattice's planes. A hit there lies on a face
+    // two tets share, and where the field kinks (the plateau's edge) the normal is either
+    // tet's: only the depth and coverage are defined. A ray in a boundary face only touches
+    // the mesh (the central column of the grazing view): it may hit or not.
+    struct View {
+      const char* what;
+      Camera camera;
+      bool rays_in_faces = false, touching_column = false;
+    };
+    const std::vector<View> views = {
+        {"along +x through vertices", look({-2, 0.5, 0.5}, {0.5, 0.5, 0.5}, {0, 0, 1}, 40), true},
+        {"on the z = 0 face, looking in", look({0.5, 0.5, 0}, {0.5, 0.5, 1}, {0, 1, 0}, 70), true},
+        {"inside the mesh", look({0.2, 0.25, 0.3}, {1, 1, 1}, {0, 0, 1}, 70)},
+        {"inside the plateau", look({0.95, 0.9, 0.95}, {0, 0, 0}, {0, 0, 1}, 70)},
+        {"along the diagonal, up reversed", look({-1, -1, -1}, {0.5, 0.5, 0.5}, {0, 0, -1}, 40), true},
+        {"grazing the x = 1 face", look({1, -2, 0.5}, {1, 0.5, 0.5}, {0, 0, 1}, 30), true, true}};
+    for (const double iso : {0.5, 1.5 - 1e-4, 0.8, 1.5})
+      for (const std::string& backend : backends_for(RenderMode::iso, DataKind::tetrahedral)) {
+        if (backend == "reference") continue;
+        for (const View& v : views) {
+          Scene s = make_scene(store, backend, RenderMode::iso, 33);
+          s.shading.light = LightKind::headlight;
+          s.isosurfaces = {Isosurface{iso * scale}};
+          const Compared c = against_reference(s, v.camera);
+          const std::string what = backend + " scale " + std::to_string(scale) + " iso " + std::to_string(iso) + ", " + v.what;
+          expect_sane(c.test.fb, what);
+          if (iso == 1.5) continue;  // ill-posed: the plateau's every point is on the surface
+          EXPECT_LE(c.e.coverage_mismatch, v.touching_column ? 33u : 0u) << what << " " << c.e.to_json();
+          EXPECT_LT(c.e.depth_max, 1e-4) << what << " " << c.e.to_json();
+          if (!v.rays_in_faces) {
+            EXPECT_LT(c.e.rmse, 0.002) << what << " " << c.e.to_json();
+          } else if (iso != 1.5 - 1e-4) {  // no kink at the crossings: the normal is defined
+            EXPECT_LT(c.e.normal_mean_deg, 0.01) << what << " " << c.e.to_json();
+          }
+        }
+      }
+  }
+}
+
+TEST_F(Stiff, AStarvedCacheIsRefusedOrSaysTheFrameIsBelowQuality) {
+  // An L1 of one brick (8^3 voxels with their apron, 4000 bytes): every back end either
+  // refuses it before the first frame, naming cache.l1 and the least it needs, or renders
+  // within it a sane frame that matches the reference or says it is below the quality asked.
+  // None may render past its budget or draw a coarse image without a word.
+  const uint64_t brick = 10 * 10 * 10 * sizeof(float);
+  for (RenderMode mode : {RenderMode::iso, RenderMode::dvr})
+    for (const std::string& backend : backends_for(mode)) {
+      Scene s = make_scene(mask_, backend, mode, 33);
+      s.cache.l1_bytes = brick;
+      s.shading.light = LightKind::headlight;
+      s.isosurfaces = {Isosurface{0.5}};
+      s.transfer_function = TransferFunction({{0.0, Vec3f(0.2f, 0.3f, 0.9f), 0.0f}, {1.0, Vec3f(0.9f, 0.6f, 0.2f), 0.12f}});
+      const std::string what = backend + " " + std::string(to_string(mode));
+      try {
+        const Compared c = against_reference(s, kOblique);
+        expect_sane(c.test.fb, what);
+        EXPECT_TRUE(c.e.rmse < 0.02 || !c.test.stats.below_quality.empty()) << what << " " << c.e.to_json();
+        const CacheStats& bricks = c.test.cache.kinds.empty() ? c.test.cache : c.test.cache.kinds.at(RecordKind::brick);
+        EXPECT_LE(bricks.l1_pool_bytes, brick) << what;
+      } catch (const Error& e) {
+        EXPECT_EQ(e.field(), "cache.l1") << what << ": " << e.what();
+        const std::string message = e.what();  // naming the least it needs
+        EXPECT_TRUE(message.find("at least") != std::string::npos || message.find("smaller than one") != std::string::npos)
+            << what << ": " << message;
+      }
+    }
 }
 
 }  // namespace
