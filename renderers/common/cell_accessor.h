@@ -13,7 +13,9 @@
 /// beyond the last voxel clamp to it, so 1-voxel-thick volumes have flat cells.
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "cache/brick_cache.h"
 #include "renderers/common/frame.h"
@@ -113,19 +115,29 @@ class CellAccessor {
   float constant_ = 0;
 };
 
-/// @brief Trilinear interpolation of corners c (index dx + 2 dy + 4 dz) at local u in [0,1]^3.
+namespace detail {
+
+/// @brief a + (b - a) u without forming b - a, which overflows where a and b are of opposite
+/// signs near the largest float: a - a u + b u, exact at u = 0 and u = 1.
 template <typename V>
-[[gnu::always_inline]] inline V trilinear(const V c[8], V ux, V uy, V uz) {
+[[gnu::always_inline]] inline V lerp_wide(V a, V b, V u) {
+  return (a - a * u) + b * u;
+}
+
+/// @brief trilinear() where no difference of corners overflows.
+template <typename V>
+[[gnu::always_inline]] inline V trilinear_fast(const V c[8], V ux, V uy, V uz) {
   const V x00 = c[0] + (c[1] - c[0]) * ux, x10 = c[2] + (c[3] - c[2]) * ux;
   const V x01 = c[4] + (c[5] - c[4]) * ux, x11 = c[6] + (c[7] - c[6]) * ux;
   const V y0 = x00 + (x10 - x00) * uy, y1 = x01 + (x11 - x01) * uy;
   return y0 + (y1 - y0) * uz;
 }
 
-/// @brief Exact gradient of the trilinear interpolant at u, in voxel units (per voxel).
+/// @brief trilinear_gradient() where no difference of corners overflows.
 template <typename V>
-inline Vec3<V> trilinear_gradient(const V c[8], V ux, V uy, V uz) {
-  const V vx = 1 - ux, vy = 1 - uy, vz = 1 - uz;
+[[gnu::always_inline]] inline Vec3<V> trilinear_gradient_fast(const V c[8], V ux, V uy, V uz) {
+  const V one = V{} + 1.0f;  // (a vector takes no int)
+  const V vx = one - ux, vy = one - uy, vz = one - uz;
   Vec3<V> g;
   g.x = ((c[1] - c[0]) * vy + (c[3] - c[2]) * uy) * vz + ((c[5] - c[4]) * vy + (c[7] - c[6]) * uy) * uz;
   g.y = ((c[2] - c[0]) * vx + (c[3] - c[1]) * ux) * vz + ((c[6] - c[4]) * vx + (c[7] - c[5]) * ux) * uz;
@@ -133,12 +145,9 @@ inline Vec3<V> trilinear_gradient(const V c[8], V ux, V uy, V uz) {
   return g;
 }
 
-/// @brief trilinear() and trilinear_gradient() together, sharing their interpolations
-/// (about half the arithmetic of the two apart). The y and z derivatives are differences of
-/// interpolated values, so the corners are taken relative to c[0] first: their rounding then
-/// scales with the cell's variation, as trilinear_gradient()'s does, not with its values.
+/// @brief trilinear_with_gradient() where no difference of corners overflows.
 template <typename V>
-[[gnu::always_inline]] inline V trilinear_with_gradient(const V c[8], V ux, V uy, V uz, Vec3<V>& g) {
+[[gnu::always_inline]] inline V trilinear_with_gradient_fast(const V c[8], V ux, V uy, V uz, Vec3<V>& g) {
   const V c1 = c[1] - c[0], c2 = c[2] - c[0], c3 = c[3] - c[0];
   const V c4 = c[4] - c[0], c5 = c[5] - c[0], c6 = c[6] - c[0], c7 = c[7] - c[0];
   const V x00 = c1 * ux, x10 = c2 + (c3 - c2) * ux;
@@ -150,6 +159,69 @@ template <typename V>
   g.y = (x10 - x00) + ((x11 - x01) - (x10 - x00)) * uz;
   g.z = y1 - y0;
   return c[0] + (y0 + (y1 - y0) * uz);
+}
+
+/// @brief trilinear() for corners whose differences overflow (lerp_wide): finite wherever
+/// they are. Out of line, so that the rare path does not grow every sampler it is inlined into.
+template <typename V>
+[[gnu::noinline, gnu::cold]] V trilinear_wide(const V c[8], V ux, V uy, V uz) {
+  const V x00 = lerp_wide(c[0], c[1], ux), x10 = lerp_wide(c[2], c[3], ux);
+  const V x01 = lerp_wide(c[4], c[5], ux), x11 = lerp_wide(c[6], c[7], ux);
+  return lerp_wide(lerp_wide(x00, x10, uy), lerp_wide(x01, x11, uy), uz);
+}
+
+/// @brief trilinear_gradient() for corners whose differences overflow: of halved corners,
+/// doubled at the end, so that a gradient within the float range is finite; one past it is
+/// infinite along the axes it overflows (facing_normal takes those for its direction).
+template <typename V>
+[[gnu::noinline, gnu::cold]] Vec3<V> trilinear_gradient_wide(const V c[8], V ux, V uy, V uz) {
+  V h[8];
+  for (int i = 0; i < 8; ++i) h[i] = c[i] * 0.5f;
+  Vec3<V> g = trilinear_gradient_fast(h, ux, uy, uz);
+  g.x = g.x * 2.0f, g.y = g.y * 2.0f, g.z = g.z * 2.0f;
+  return g;
+}
+
+}  // namespace detail
+
+/// @brief Whether a grid's values come near enough to the largest float for differences of
+/// corners, and differences of those (trilinear_with_gradient), to overflow: beyond a quarter
+/// of it. Then the samplers interpolate the wide way (`wide` below), slower but finite; a
+/// step between +-0.6 FLT_MAX once drew flat surfaces up to 11 voxels deep in every float
+/// back end. Elsewhere the usual arithmetic costs nothing more.
+inline bool needs_wide_interpolation(const GridView& grid) {
+  double largest = 0;
+  for (const NodeRecord& n : grid.nodes().level(0)) largest = std::max({largest, std::fabs(double(n.min)), std::fabs(double(n.max))});
+  return !(largest <= 0.25 * double(std::numeric_limits<float>::max()));
+}
+
+/// @brief Trilinear interpolation of corners c (index dx + 2 dy + 4 dz) at local u in [0,1]^3;
+/// `wide` for corners whose differences may overflow (needs_wide_interpolation).
+template <typename V>
+[[gnu::always_inline]] inline V trilinear(const V c[8], V ux, V uy, V uz, bool wide = false) {
+  if (wide) [[unlikely]] return detail::trilinear_wide(c, ux, uy, uz);
+  return detail::trilinear_fast(c, ux, uy, uz);
+}
+
+/// @brief Exact gradient of the trilinear interpolant at u, in voxel units (per voxel).
+template <typename V>
+[[gnu::always_inline]] inline Vec3<V> trilinear_gradient(const V c[8], V ux, V uy, V uz, bool wide = false) {
+  if (wide) [[unlikely]] return detail::trilinear_gradient_wide(c, ux, uy, uz);
+  return detail::trilinear_gradient_fast(c, ux, uy, uz);
+}
+
+/// @brief trilinear() and trilinear_gradient() together, sharing their interpolations
+/// (about half the arithmetic of the two apart). The y and z derivatives are differences of
+/// interpolated values, so the corners are taken relative to c[0] first: their rounding then
+/// scales with the cell's variation, as trilinear_gradient()'s does, not with its values.
+/// Wide corners take the two apart.
+template <typename V>
+[[gnu::always_inline]] inline V trilinear_with_gradient(const V c[8], V ux, V uy, V uz, Vec3<V>& g, bool wide = false) {
+  if (wide) [[unlikely]] {
+    g = detail::trilinear_gradient_wide(c, ux, uy, uz);
+    return detail::trilinear_wide(c, ux, uy, uz);
+  }
+  return detail::trilinear_with_gradient_fast(c, ux, uy, uz, g);
 }
 
 /// @brief Gradient (voxel units) at p by central or forward differences one voxel apart, each
@@ -179,7 +251,8 @@ inline Vec3<V> confined_difference_gradient(const Vec3<V>& p, const V lo[3], con
 template <typename Stored, typename V>
 class TrilinearSampler {
  public:
-  TrilinearSampler(BrickCache& cache, RayCounters& counters, int level) : cells_(cache, counters, level) {
+  TrilinearSampler(BrickCache& cache, RayCounters& counters, int level)
+      : cells_(cache, counters, level), wide_(needs_wide_interpolation(cache.grid())) {
     for (int a = 0; a < 3; ++a) last_cell_[a] = std::max<int64_t>(0, cells_.dims()[a] - 2);
   }
 
@@ -187,7 +260,7 @@ class TrilinearSampler {
     int64_t cell[3];
     locate(p, cell, last_u_);
     load(cell);
-    return trilinear(c_, last_u_[0], last_u_[1], last_u_[2]);
+    return trilinear(c_, last_u_[0], last_u_[1], last_u_[2], wide_);
   }
   /// @brief The exact trilinear gradient (voxel units) at the point of the last sample(p), from
   /// its cell's corners: what sample(p, gradient) gives, for a caller that needs the gradient
@@ -195,15 +268,15 @@ class TrilinearSampler {
   /// visible), without locating p and interpolating again (a tenth of raymarch's lit DVR
   /// instructions). Valid only directly after sample(p): the other sampling calls load other
   /// cells without recording where in them they sampled.
-  Vec3<V> last_sample_gradient() const { return trilinear_gradient(c_, last_u_[0], last_u_[1], last_u_[2]); }
+  Vec3<V> last_sample_gradient() const { return trilinear_gradient(c_, last_u_[0], last_u_[1], last_u_[2], wide_); }
   /// @brief Value and exact trilinear gradient (voxel units).
   V sample(const Vec3<V>& p, Vec3<V>& gradient) {
     int64_t cell[3];
     V u[3];
     locate(p, cell, u);
     load(cell);
-    gradient = trilinear_gradient(c_, u[0], u[1], u[2]);
-    return trilinear(c_, u[0], u[1], u[2]);
+    gradient = trilinear_gradient(c_, u[0], u[1], u[2], wide_);
+    return trilinear(c_, u[0], u[1], u[2], wide_);
   }
   /// @brief Value at p with its cell confined to cells [lo, hi] per axis (p outside them
   /// clamps to their faces): reads only the bricks those cells lie in.
@@ -216,7 +289,7 @@ class TrilinearSampler {
       u[a] = cells_.dims()[a] > 1 ? std::clamp(x - V(cell[a]), V(0), V(1)) : V(0);
     }
     load(cell);
-    return trilinear(c_, u[0], u[1], u[2]);
+    return trilinear(c_, u[0], u[1], u[2], wide_);
   }
 
   /// @brief Gradient (voxel units) by central or forward differences one voxel apart,
@@ -258,6 +331,7 @@ class TrilinearSampler {
   }
 
   CellAccessor<Stored> cells_;
+  bool wide_;  // needs_wide_interpolation
   int64_t last_cell_[3];
   int64_t cur_[3] = {-1, -1, -1};
   V c_[8] = {};

@@ -151,11 +151,21 @@ class ShadingModel {
 };
 
 /// @brief The unit normal of a field gradient g (world units), facing against the ray
-/// direction; the ray's reverse where the gradient vanishes.
+/// direction; the ray's reverse where the gradient vanishes or is NaN. A gradient that
+/// overflowed (single-precision samplers, values near the largest float) points along its
+/// infinite components.
 inline Vec3d facing_normal(const Vec3d& gradient, const Vec3d& ray_dir) {
-  const double len = length(gradient);
+  Vec3d g = gradient;
+  double len = length(g);
+  if (std::isinf(len)) [[unlikely]] {  // an infinite component, or finite ones whose squares overflow
+    const bool overflowed = std::isinf(g.x) || std::isinf(g.y) || std::isinf(g.z);
+    const double largest = std::max({std::fabs(g.x), std::fabs(g.y), std::fabs(g.z)});
+    for (int a = 0; a < 3; ++a)
+      g[a] = !overflowed ? g[a] / largest : std::isinf(g[a]) ? std::copysign(1.0, g[a]) : std::isnan(g[a]) ? g[a] : 0.0;
+    len = length(g);
+  }
   if (!(len > 0) || !std::isfinite(len)) return -ray_dir;
-  const Vec3d n = gradient / len;
+  const Vec3d n = g / len;
   return dot(n, ray_dir) > 0 ? -n : n;
 }
 

@@ -404,11 +404,11 @@ void Tracer<Voxel>::run_samples(const PathNode& b, const RunPositions& at, const
   const double to_unit = b.scale * double(r.m_);  // brick voxels to unit coordinates
   if (gradients) {
     Vec3<Floats> g;
-    const Floats v = trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g);
+    const Floats v = trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g, r.wide_values_);
     std::memcpy(&ln.value[1], &v, sizeof v);
     gradients_in_doubles(g, to_unit, ln.gradient, ln.normal);
   } else {
-    const Floats v = trilinear(corner, uf[0], uf[1], uf[2]);
+    const Floats v = trilinear(corner, uf[0], uf[1], uf[2], r.wide_values_);
     std::memcpy(&ln.value[1], &v, sizeof v);
     std::fill_n(&ln.gradient[0][0], 3 * L, 0.0);
     std::fill_n(ln.normal, L, false);
@@ -562,7 +562,7 @@ void Tracer<Voxel>::lighting_between(const PathNode& b, const int32_t (&cell)[3]
   }
   cells_and_corners(b, x, c, uf, corner);
   Vec3<Floats> g;
-  trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g);
+  trilinear_with_gradient(corner, uf[0], uf[1], uf[2], g, r.wide_values_);
   double gradient[3][L], world[3][L];
   gradients_in_doubles(g, b.scale * double(r.m_), gradient, normal);
   for (int a = 0; a < 3; ++a)

@@ -10,6 +10,7 @@
 
 #include "core/timing.h"
 #include "core/units.h"
+#include "renderers/common/cell_accessor.h"
 #include "renderers/gigavoxels/renderer.h"
 
 namespace brickyard::gigavoxels {
@@ -49,6 +50,7 @@ GigaVoxelsRenderer<Voxel>::GigaVoxelsRenderer(const RenderContext& ctx, const Gi
   // above it asks to be subdivided). A power of two, so a descent stops exactly at that depth.
   if (p.source != 1)
     if (const int d = layout.coarsest_resolving(); d > 0) max_footprint_ = 1.0 / (double(m_) * double(int64_t(1) << d));
+  if (p.source != 1) wide_values_ = needs_wide_interpolation(ctx.bricks().grid());
   scales_ = node_scales(n_, source_->max_depth() + 1);
   for (const Scale& sc : scales_) inv_scales_.push_back(1.0 / sc.hi);
   if (p.source == 1) outside_value_ = 0.0f;

@@ -242,6 +242,7 @@ class GigaVoxelsRenderer final : public Renderer {
   // The largest footprint (unit coordinates): the voxel of the coarsest depth whose level still
   // resolves every axis of the store (GridLayout::coarsest_resolving); infinite where level 0 does.
   double max_footprint_ = kInf;
+  bool wide_values_ = false;  // needs_wide_interpolation: values near the largest float
   double inv_log2_arity_ = 1;
   int n_ = 2, m_ = 32;
   double inv_m_ = 1.0 / 32;

@@ -78,6 +78,7 @@ class GobbettiRenderer final : public Renderer {
       : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), layout_(ctx.layout()), p_(p), shading_(scene_.shading, geo_) {
     lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
     coarsest_level_ = layout_.coarsest_resolving();
+    wide_values_ = needs_wide_interpolation(ctx.bricks().grid());
     clip_world_ = Box3d(geo_.to_world(geo_.voxel_clip.lo), geo_.to_world(geo_.voxel_clip.hi));
     M_ = layout_.brick_size;
     A_ = ctx.bricks().shape().apron;
@@ -442,6 +443,7 @@ class GobbettiRenderer final : public Renderer {
       float lo[3] = {}, ld[3] = {};
       float inside_lo[3] = {}, inside_hi[3] = {};  // the level's voxel centres, local
       int64_t cell_lo[3] = {}, cell_hi[3] = {};    // the cells between them
+      bool wide = false;                           // needs_wide_interpolation
       mutable int64_t cached = -1;
       mutable float c[8] = {};
 
@@ -461,8 +463,8 @@ class GobbettiRenderer final : public Renderer {
           c[4] = float(p[dz]), c[5] = float(p[dz + 1]), c[6] = float(p[dz + dy]), c[7] = float(p[dz + dy + 1]);
           cached = index;
         }
-        if (gradient) *gradient = Vec3d(trilinear_gradient(c, u[0], u[1], u[2])) * double(inv_scale);
-        return trilinear(c, u[0], u[1], u[2]);
+        if (gradient) *gradient = Vec3d(trilinear_gradient(c, u[0], u[1], u[2], wide)) * double(inv_scale);
+        return trilinear(c, u[0], u[1], u[2], wide);
       }
     };
 
@@ -471,6 +473,7 @@ class GobbettiRenderer final : public Renderer {
       b.data = r.data_[leaf.payload];
       b.level = int(leaf.key.level);
       b.e = r.E_;
+      b.wide = r.wide_values_;
       const double inv_scale = 1.0 / double(int64_t(1) << r.layout_.steps(b.level));
       b.inv_scale = float(inv_scale);
       const Vec3s level_dims = r.layout_.level_dims(b.level);
@@ -681,6 +684,7 @@ class GobbettiRenderer final : public Renderer {
   ShadingModel shading_;
   double lod_ratio_ = 1;
   int coarsest_level_ = 0;  // the coarsest level that resolves every axis (GridLayout::coarsest_resolving)
+  bool wide_values_ = false;  // needs_wide_interpolation: values near the largest float
   Box3d clip_world_;  // the rendered region in world coordinates
   int64_t M_ = 32, A_ = 1, E_ = 34;
   std::vector<double> step_by_level_;   // sampling step per level, finest voxels
