@@ -218,7 +218,8 @@ std::vector<std::byte> lay_out_page(const OctreeLayout& layout, int root, const 
   std::memcpy(p, &h, sizeof h);
   p += sizeof h;
   for (int l = 0; l < levels; ++l) {
-    std::memcpy(p, nodes[size_t(l)].data(), nodes[size_t(l)].size() * sizeof(OctreeNode));
+    if (!nodes[size_t(l)].empty())  // (an empty level's data() may be null, which memcpy may not take)
+      std::memcpy(p, nodes[size_t(l)].data(), nodes[size_t(l)].size() * sizeof(OctreeNode));
     p += nodes[size_t(l)].size() * sizeof(OctreeNode);
     T* s = reinterpret_cast<T*>(p);
     for (size_t i = 0; i < nodes[size_t(l)].size(); ++i) {

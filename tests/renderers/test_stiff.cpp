@@ -388,5 +388,28 @@ TEST_F(Stiff, AStepBetweenValuesNearTheLargestFloatKeepsItsSurface) {
     }
 }
 
+TEST(StiffRays, AxisViewsGiveRaysNoNegativeZeroComponent) {
+  // Back ends take a zero direction component as +0.0 (1 / d is +infinity in slab tests and
+  // cell walks): no camera looking along an axis, whatever its up vector, gives a ray a -0.0
+  // one (the basis' zero terms sum to +0.0), so a -0.0 never reaches them from a scene.
+  const Vec3d axes[] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  int zeros = 0;
+  for (const Vec3d& d : axes)
+    for (const Vec3d& up : axes) {
+      if (dot(d, up) != 0) continue;
+      const Camera c = look(Vec3d(12.0) - d * 30.0, Vec3d(12.0), up, 40);
+      for (int y = 0; y < 33; ++y)
+        for (int x = 0; x < 33; ++x) {
+          const Rayd r = c.ray(x + 0.5, y + 0.5, 33, 33);
+          for (int a = 0; a < 3; ++a)
+            if (r.dir[a] == 0) {
+              ++zeros;
+              EXPECT_FALSE(std::signbit(r.dir[a])) << "dir " << d << " up " << up << " pixel " << x << " " << y;
+            }
+        }
+    }
+  EXPECT_GT(zeros, 1000);  // the central rows and columns
+}
+
 }  // namespace
 }  // namespace brickyard
