@@ -411,5 +411,33 @@ TEST(StiffRays, AxisViewsGiveRaysNoNegativeZeroComponent) {
   EXPECT_GT(zeros, 1000);  // the central rows and columns
 }
 
+TEST_F(Stiff, AStepTransferFunctionMatchesTheReference) {
+  // Opacity jumping from 0 to 0.5 within 1e-6 of the value range at 0.5 (a threshold, as
+  // users draw segmentations), lit and unlit, over the mask (its interpolated edge) and a
+  // linear ramp: the marchers' error is their step's, the pre-integrated back end's its
+  // table's; none may lose the step's surface.
+  const int n = 20;
+  std::vector<float> ramp;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) ramp.push_back(float(x + 2 * y + 3 * z) / 114.0f);
+  const std::vector<std::pair<std::string, std::string>> stores = {{"mask", mask_},
+                                                                   {"ramp", build_array(*dir_, "ramp01", {n, n, n}, ramp)}};
+  for (const auto& [name, store] : stores)
+    for (const LightKind light : {LightKind::none, LightKind::headlight})
+      for (const std::string& backend : backends_for(RenderMode::dvr)) {
+        if (backend == "reference") continue;
+        Scene s = make_scene(store, backend, RenderMode::dvr, 33);
+        s.shading.light = light;
+        s.transfer_function = TransferFunction({{0.0, Vec3f(0.2f, 0.3f, 0.9f), 0.0f}, {0.5, Vec3f(0.2f, 0.3f, 0.9f), 0.0f},
+                                                {0.5 + 1e-6, Vec3f(0.9f, 0.6f, 0.2f), 0.5f}, {1.0, Vec3f(0.9f, 0.6f, 0.2f), 0.5f}});
+        const Compared c = against_reference(s, name == "mask" ? kOblique : look({-12, -9, 30}, {9.5, 9.5, 9.5}, {0, 0, 1}, 45));
+        const std::string what = backend + " " + name + (light == LightKind::none ? " unlit" : " lit");
+        EXPECT_GT(expect_sane(c.test.fb, what), 200) << what;
+        EXPECT_LT(c.e.rmse, 0.02) << what << " " << c.e.to_json();  // measured 0.0006-0.0152
+        EXPECT_LT(c.e.coverage_mismatch_fraction, 0.005) << what << " " << c.e.to_json();
+      }
+}
+
 }  // namespace
 }  // namespace brickyard
