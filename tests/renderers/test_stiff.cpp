@@ -62,6 +62,16 @@ std::vector<float> ball_mask(int n, double radius) {
   return v;
 }
 
+/// f = scale (x + 2y + 3z) on n^3 voxels: a gradient of (1, 2, 3) scale everywhere, its faces
+/// included.
+std::vector<float> linear_ramp(int n, double scale = 1.0) {
+  std::vector<float> v;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) v.push_back(float(scale * (x + 2 * y + 3 * z)));
+  return v;
+}
+
 class Stiff : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -108,11 +118,7 @@ TEST_F(Stiff, LitDvrEnteringThroughAFaceIsShadedFromTheData) {
   // outside its first voxel centre does (here at lod_ratio 4). The coarse
   // levels of a linear field are linear (32 = 2^5: every coarse voxel averages whole blocks).
   const int n = 32;
-  std::vector<float> v;
-  for (int z = 0; z < n; ++z)
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) v.push_back(float(x + 2 * y + 3 * z));
-  const std::string store = build_array(*dir_, "linear", {n, n, n}, v);
+  const std::string store = build_array(*dir_, "linear", {n, n, n}, linear_ramp(n));
   for (const std::string& backend : backends_for(RenderMode::dvr)) {
     if (backend == "reference") continue;
     for (double lod_ratio : {0.01, 4.0})
@@ -186,10 +192,7 @@ TEST_F(Stiff, TransferFunctionsOverDenormalAndHugeRangesKeepTheirShape) {
   // entry (RMSE 0.069).
   const int n = 20;
   for (double scale : {1e-42, 2.5e36}) {
-    std::vector<float> v;
-    for (int z = 0; z < n; ++z)
-      for (int y = 0; y < n; ++y)
-        for (int x = 0; x < n; ++x) v.push_back(float(scale * (x + 2 * y + 3 * z)));
+    const std::vector<float> v = linear_ramp(n, scale);
     const std::string store = build_array(*dir_, "scaled" + std::to_string(scale), {n, n, n}, v);
     const double hi = double(v.back());
     for (const std::string& backend : backends_for(RenderMode::dvr)) {
@@ -417,10 +420,7 @@ TEST_F(Stiff, AStepTransferFunctionMatchesTheReference) {
   // linear ramp: the marchers' error is their step's, the pre-integrated back end's its
   // table's; none may lose the step's surface.
   const int n = 20;
-  std::vector<float> ramp;
-  for (int z = 0; z < n; ++z)
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) ramp.push_back(float(x + 2 * y + 3 * z) / 114.0f);
+  const std::vector<float> ramp = linear_ramp(n, 1.0 / 114);
   const std::vector<std::pair<std::string, std::string>> stores = {{"mask", mask_},
                                                                    {"ramp", build_array(*dir_, "ramp01", {n, n, n}, ramp)}};
   for (const auto& [name, store] : stores)
