@@ -18,6 +18,7 @@
 #include "cache/policy.h"
 #include "cache/replay.h"
 #include "cache/trace.h"
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/plot.h"
@@ -201,8 +202,7 @@ void run_cachebench(const CachebenchOptions& o) {
 
   const std::string csv = !o.csv.empty() ? o.csv : (!o.plot.empty() ? o.plot + ".csv" : std::string());
   if (!csv.empty()) {
-    std::ofstream out(csv + ".partial");
-    out << "policy,size_fraction,capacity_bytes,requests,misses,miss_ratio,byte_miss_ratio,evictions,failed_evictions,"
+    std::string out = "policy,size_fraction,capacity_bytes,requests,misses,miss_ratio,byte_miss_ratio,evictions,failed_evictions,"
            "prefetches,prefetch_accuracy,prefetch_coverage,late_prefetches,prefetch_wasted_bytes,metadata_bytes_per_entry,"
            "requests_per_second,miss_ratio_windows\n";
     for (size_t p = 0; p < policies.size(); ++p)
@@ -210,15 +210,15 @@ void run_cachebench(const CachebenchOptions& o) {
         const ReplayResult& r = at(p, s);
         std::string windows;
         for (double m : r.miss_ratio_windows) windows += fmt::format("{}{:.4f}", windows.empty() ? "" : ";", m);
-        out << fmt::format("{},{:g},{},{},{},{:.6f},{:.6f},{},{},{},{:.4f},{:.4f},{},{},{:.1f},{:.0f},{}\n", policies[p],
+        out += fmt::format("{},{:g},{},{},{},{:.6f},{:.6f},{},{},{},{:.4f},{:.4f},{},{},{:.1f},{:.0f},{}\n", policies[p],
                            sizes[s].fraction, r.capacity, r.requests, r.misses, r.miss_ratio(), r.byte_miss_ratio(),
                            r.evictions, r.failed_evictions, r.prefetches, r.prefetch_accuracy(), r.prefetch_coverage(),
                            r.late_prefetches, r.prefetch_wasted_bytes, r.metadata_bytes_per_entry,
                            r.requests_per_second(), windows);
       }
-    out.close();
-    if (!out) throw Error(Errc::io, "write failed").with_file(csv);
-    std::filesystem::rename(csv + ".partial", csv);
+    AtomicFile file(csv);  // (refuses a path that is not a regular file)
+    file.write(out.data(), out.size());
+    file.commit();
     std::cout << fmt::format("\nwrote {}\n", csv);
   }
   if (!o.plot.empty()) {

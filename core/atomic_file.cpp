@@ -10,7 +10,22 @@
 
 namespace brickyard {
 
+void refuse_to_replace_non_regular(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::file_status st = std::filesystem::status(path, ec);
+  if (ec || !std::filesystem::exists(st) || std::filesystem::is_regular_file(st)) return;  // absent, or a file
+  const char* what = std::filesystem::is_directory(st)           ? "a directory"
+                     : std::filesystem::is_character_file(st)    ? "a character device"
+                     : std::filesystem::is_block_file(st)        ? "a block device"
+                     : std::filesystem::is_fifo(st)              ? "a FIFO"
+                     : std::filesystem::is_socket(st)            ? "a socket"
+                                                                 : "not a regular file";
+  throw Error(Errc::io, fmt::format("exists and is {}: outputs replace only regular files; choose a file path", what))
+      .with_file(path);
+}
+
 AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), partial_(path_ + ".partial") {
+  refuse_to_replace_non_regular(path_);
   file_ = std::fopen(partial_.c_str(), "wb");
   if (!file_) throw Error(Errc::io, fmt::format("cannot create: {}", std::strerror(errno))).with_file(path_);
 }

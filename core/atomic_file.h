@@ -10,9 +10,16 @@
 
 namespace brickyard {
 
+/// @brief Refuses an output path that exists and is not a regular file (a directory, a device
+/// such as /dev/null, a FIFO, a socket, or a link to one): every writer puts its bytes in a
+/// temporary file renamed over the path, which would replace such a thing with a regular file
+/// (run as root, `-o /dev/null` replaced the device). @throws Error(io) naming the path.
+void refuse_to_replace_non_regular(const std::string& path);
+
 class AtomicFile {
  public:
-  /// @throws Error(io) naming `path` when PATH.partial cannot be created.
+  /// @throws Error(io) naming `path` when PATH.partial cannot be created, or when `path` is
+  /// not a regular file (refuse_to_replace_non_regular).
   explicit AtomicFile(std::string path);
   ~AtomicFile();
   AtomicFile(const AtomicFile&) = delete;

@@ -14,6 +14,7 @@
 
 #include <fmt/format.h>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 
 extern char** environ;
@@ -123,6 +124,7 @@ bool gnuplot_available() {
 void run_gnuplot(const std::string& script_body, const std::string& png_path, int width, int height) {
   if (width <= 0 || height <= 0)
     throw Error(Errc::invalid_argument, fmt::format("plot size {}x{} must be positive", width, height)).with_file(png_path);
+  refuse_to_replace_non_regular(png_path);
   const std::string partial = png_path + ".partial";
   const std::string header = fmt::format("set terminal pngcairo size {},{} font 'sans,11'\nset output {}\n", width,
                                          height, gnuplot_quote(partial));

@@ -30,6 +30,7 @@
 #include <openvdb/tools/Prune.h>
 #include <tbb/global_control.h>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/progress.h"
@@ -497,6 +498,7 @@ void export_vdb(const Store& store, int level, const VoxelBox& region, const std
   grid->insertMeta("brickyard_store", vdb::StringMetadata(store.path()));
 
   // Atomic like the raw export: a reader never sees a half-written file under `path`.
+  refuse_to_replace_non_regular(path);
   const std::string tmp = path + ".partial";
   try {
     [[maybe_unused]] const OpenVdbCall call;

@@ -4,6 +4,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -96,6 +98,27 @@ TEST_F(CliRender, WritesColourDepthNormalsAndStats) {
   EXPECT_EQ(f["rays"], 48 * 32);
   EXPECT_GT(f["gradients"].get<int64_t>(), 0);  // headlight shading by default
   for (const char* key : {"l1", "l2", "l3", "stalls"}) EXPECT_TRUE(stats["cache"].contains(key)) << key;
+}
+
+TEST_F(CliRender, AnOutputThatIsNotARegularFileIsRefusedAndLeftAsItIs) {
+  // Every output goes to a temporary file renamed over its path, which would replace a device
+  // (run as root, -o /dev/null became a regular file), a FIFO or a directory's link: such a
+  // path is refused, naming it, with a non-zero exit, and is still what it was.
+  testing::TempDir out;
+  const std::string scene = write_scene("refuse.json", R"("image": {"width": 16, "height": 16}, )" + kCamera + ", " + kIso);
+  const std::string fifo = out.file("pipe"), folder = out.file("folder");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  fs::create_directory(folder);
+  for (const std::string& args : {"-o " + fifo, "-o " + folder, "-o " + out.file("c.png") + " --stats " + fifo}) {
+    const auto r = brickyard("render " + scene + " " + args);
+    EXPECT_NE(r.exit_code, 0) << args << r.output;
+    EXPECT_THAT(r.output, HasSubstr("outputs replace only regular files")) << args;
+    EXPECT_TRUE(fs::is_fifo(fifo)) << args;
+    EXPECT_TRUE(fs::is_directory(folder)) << args;
+    EXPECT_FALSE(fs::exists(fifo + ".partial")) << args;
+  }
+  const auto r = brickyard("render " + scene + " -o " + fifo);
+  EXPECT_THAT(r.output, HasSubstr(fifo + ": exists and is a FIFO"));
 }
 
 TEST_F(CliRender, CameraPathFramesAreNumbered) {
