@@ -234,9 +234,10 @@ struct FlightCliOptions {
   int frames = 0, loaders = 2, time_step = 0;
   double lod = 1.0;
   std::string values;
+  bool allow_damaged = false;
 };
 
-void run_flight(const FlightCliOptions& o) {
+int run_flight(const FlightCliOptions& o) {
   Store store(o.store);
   CacheConfig c;
   c.l1_bytes = parse_bytes(o.l1, "--l1");
@@ -251,6 +252,10 @@ void run_flight(const FlightCliOptions& o) {
   f.lod_ratio = o.lod;
   f.frames = o.frames;
   std::string stats_json;
+  std::vector<std::string> unreadable;
+  const auto collect_unreadable = [&](const PageCache& cache) {
+    for (const PageCache::FailedPage& p : cache.failed_pages()) unreadable.push_back(p.error);
+  };
   if (store.kind() == DataKind::tetrahedral) {
     if (o.time_step < 0 || o.time_step >= store.manifest().time_steps)
       throw Error(Errc::invalid_argument, fmt::format("time step {} of a mesh with {}", o.time_step, store.manifest().time_steps))
@@ -277,6 +282,7 @@ void run_flight(const FlightCliOptions& o) {
                              format_bytes(double(s.l2_peak_bytes)), format_bytes(double(c.l2_bytes)),
                              format_bytes(double(s.l3_bytes_read)));
     stats_json = s.to_json();
+    collect_unreadable(cache);
   } else {
     if (!o.values.empty() || o.time_step != 0)
       throw Error(Errc::invalid_argument, "--values and --time-step apply to meshes").with_file(o.store);
@@ -302,17 +308,19 @@ void run_flight(const FlightCliOptions& o) {
                              format_bytes(double(s.l2_peak_bytes)), format_bytes(double(c.l2_bytes)),
                              format_bytes(double(s.l3_bytes_read)), s.latency_p50_ms, s.latency_p99_ms);
     stats_json = s.to_json();
+    collect_unreadable(cache.pages());
   }  // the cache writes its trace when it closes
   if (!o.stats.empty()) {
     write_file_atomically(o.stats, stats_json + "\n");
     std::cout << fmt::format("wrote {}\n", o.stats);
   }
   if (!o.trace.empty()) std::cout << fmt::format("wrote {} (replay it with brickyard cachebench)\n", o.trace);
+  return report_unreadable(unreadable, o.allow_damaged);
 }
 
 }  // namespace
 
-void add_cache_commands(CLI::App& app) {
+void add_cache_commands(CLI::App& app, int& exit_status) {
   {
     auto o = std::make_shared<FlightCliOptions>();
     auto* cmd = app.add_subcommand("flight", "Fly a camera path through a store's cache, as a level-of-detail renderer would");
@@ -331,7 +339,9 @@ void add_cache_commands(CLI::App& app) {
     cmd->add_option("--time-step", o->time_step, "Meshes: the time step whose value ranges --values tests")
         ->capture_default_str();
     cmd->add_option("--stats", o->stats, "Write the cache statistics as JSON");
-    cmd->callback([o] { run_flight(*o); });
+    cmd->add_flag("--allow-damaged", o->allow_damaged,
+                  "Exit 0 when records of the store cannot be read (listed; without it the exit status is 3)");
+    cmd->callback([o, &exit_status] { exit_status = run_flight(*o); });
   }
   {
   auto o = std::make_shared<CachebenchOptions>();

@@ -73,6 +73,7 @@ struct RenderOptions {
   std::vector<std::string> sets;
   bool list = false;
   bool settle = false;
+  bool allow_damaged = false;
 };
 
 void print_backends() {
@@ -91,10 +92,10 @@ void print_backends() {
   }
 }
 
-void run_render(const RenderOptions& o) {
+int run_render(const RenderOptions& o) {
   if (o.list) {
     print_backends();
-    return;
+    return 0;
   }
   if (o.scene.empty()) throw Error(Errc::invalid_argument, "a scene file is required").with_field("SCENE");
   if (o.out.empty()) throw Error(Errc::invalid_argument, "an output PNG is required").with_field("-o");
@@ -180,6 +181,12 @@ void run_render(const RenderOptions& o) {
       std::cout << "  mean " << line << "\n";
     }
   }
+  // Both sessions' caches: the reference's reads the same store.
+  std::vector<std::string> unreadable;
+  for (RenderSession* s : {&session, reference.get()})
+    if (s)
+      for (const PageCache::FailedPage& p : s->pages().failed_pages())
+        if (std::find(unreadable.begin(), unreadable.end(), p.error) == unreadable.end()) unreadable.push_back(p.error);
   if (!o.stats.empty()) {
     nlohmann::json j;
     j["scene"] = o.scene;
@@ -188,8 +195,10 @@ void run_render(const RenderOptions& o) {
     j["frames"] = all;
     j["frames_below_quality"] = below_quality;
     j["cache"] = nlohmann::json::parse(session.pages().stats().to_json());
+    j["unreadable"] = unreadable;
     write_text(o.stats, j.dump(2) + "\n");
   }
+  return report_unreadable(unreadable, o.allow_damaged);
 }
 
 // --- bench ---------------------------------------------------------------------------------
@@ -414,7 +423,7 @@ void run_bench(const BenchOptions& o) {
 
 }  // namespace
 
-void add_render_commands(CLI::App& app) {
+void add_render_commands(CLI::App& app, int& exit_status) {
   {
     auto o = std::make_shared<RenderOptions>();
     CLI::App* cmd = app.add_subcommand("render", "Render a scene (JSON) with its back end, or the one --backend names");
@@ -430,7 +439,10 @@ void add_render_commands(CLI::App& app) {
     cmd->add_option("--error-maps", o->error_maps, "Also render the reference; print the error and write heat maps into this directory");
     cmd->add_flag("--list-backends", o->list, "List the back ends, their modes and parameters");
     cmd->add_flag("--settle", o->settle, "Camera paths: let asynchronous back ends converge on every frame (a still camera always does)");
-    cmd->callback([o] { run_render(*o); });
+    cmd->add_flag("--allow-damaged", o->allow_damaged,
+                  "Exit 0 when records of the store cannot be read (they are drawn from a coarser level or left empty, "
+                  "and listed; without it the exit status is 3)");
+    cmd->callback([o, &exit_status] { exit_status = run_render(*o); });
   }
   {
     auto o = std::make_shared<BenchOptions>();
@@ -450,6 +462,22 @@ void add_render_commands(CLI::App& app) {
     cmd->add_option("--out", o->out, "Report directory (bench.md, bench.csv, equal-error.csv, error-vs-time.png, contact-sheet.png, images/)");
     cmd->callback([o] { run_bench(*o); });
   }
+}
+
+int report_unreadable(const std::vector<std::string>& errors, bool allow_damaged) {
+  if (errors.empty()) return 0;
+  constexpr size_t kShown = 8;
+  std::string list;
+  for (size_t i = 0; i < std::min(errors.size(), kShown); ++i) list += fmt::format("\n  {}", errors[i]);
+  if (errors.size() > kShown) list += fmt::format("\n  and {} more", errors.size() - kShown);
+  std::cerr << fmt::format("brickyard: {}: {} record{} of the store could not be read; renderers draw such records from "
+                           "a coarser level where one can be read, else leave them empty:{}\n",
+                           allow_damaged ? "warning" : "error", errors.size(), errors.size() == 1 ? "" : "s", list);
+  if (allow_damaged) return 0;
+  std::cerr << fmt::format("brickyard: exit status {} (damaged store); --allow-damaged accepts the image; `brickyard verify "
+                           "STORE` lists every damaged record\n",
+                           kExitDamaged);
+  return kExitDamaged;
 }
 
 }  // namespace brickyard::cli

@@ -54,9 +54,17 @@ void print_mesh_info(const std::string& path, const Store& store);
 int verify_mesh(const std::string& path, const Store& store);
 /// @brief Writes the store's mesh as a .vtu (`encoding`: ascii, binary, appended, base64, zlib).
 void export_mesh(const Store& store, const std::string& out, const std::string& encoding);
-/// @brief cachebench.
-void add_cache_commands(CLI::App& app);
-/// @brief render, bench.
-void add_render_commands(CLI::App& app);
+/// @brief flight, cachebench. flight sets exit_status (kExitDamaged, see report_unreadable).
+void add_cache_commands(CLI::App& app, int& exit_status);
+/// @brief render, bench. render sets exit_status (kExitDamaged, see report_unreadable).
+void add_render_commands(CLI::App& app, int& exit_status);
+
+/// @brief Exit status of a run that drew around records it could not read (corrupt or missing
+/// in the store), unless --allow-damaged.
+inline constexpr int kExitDamaged = 3;
+/// @brief Says on stderr how many records a run could not read and why (each error names its
+/// store and key; the first few in full), and that the image drew them from a coarser level or
+/// left them empty. Returns kExitDamaged, or 0 when there were none or `allow_damaged`.
+int report_unreadable(const std::vector<std::string>& errors, bool allow_damaged);
 
 }  // namespace brickyard::cli

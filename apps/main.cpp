@@ -30,8 +30,8 @@ int main(int argc, char** argv) {
   int exit_status = 0;
   cli::add_store_commands(app, exit_status);
   cli::add_octree_commands(app);
-  cli::add_cache_commands(app);
-  cli::add_render_commands(app);
+  cli::add_cache_commands(app, exit_status);
+  cli::add_render_commands(app, exit_status);
 
   std::unique_ptr<tbb::global_control> thread_limit;
   app.parse_complete_callback([&] {

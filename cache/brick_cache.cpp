@@ -60,6 +60,19 @@ BrickHandle BrickCache::fetch(const BrickKey& key) {
   return h;
 }
 
+BrickHandle BrickCache::fetch_or_failed(const BrickKey& key) {
+  if (!grid_.layout().contains(key)) return lookup(key, 0, false);  // a failed handle naming the grid
+  BrickHandle h;
+  const NodeRecord& node = grid_.nodes().at(key);
+  if (node.is_constant()) {
+    set_node(h, key, node, BrickHandle::State::constant);
+    return h;
+  }
+  h.page_ = pages_.fetch_or_failed(page_key(key));
+  set_node(h, key, node, h.page_.failed() ? BrickHandle::State::failed : BrickHandle::State::resident);
+  return h;
+}
+
 void BrickCache::request(const BrickKey& key, float priority) {
   if (!grid_.layout().contains(key) || grid_.nodes().at(key).is_constant()) return;
   pages_.request(page_key(key), priority);

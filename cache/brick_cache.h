@@ -98,6 +98,9 @@ class BrickCache {
   /// @brief Blocking access for tools, tests and the reference renderer. Throws the load's
   /// Error for a corrupt brick or a key outside the store.
   BrickHandle fetch(const BrickKey& key);
+  /// @brief fetch() that answers a brick which cannot be read with a failed handle instead of
+  /// throwing (PageCache::fetch_or_failed): renderers draw around it and report it.
+  BrickHandle fetch_or_failed(const BrickKey& key);
   /// @brief Asks for a brick without looking it up (prefetch, refinement requests); constant
   /// nodes and keys outside the grid are not asked for.
   void request(const BrickKey& key, float priority);

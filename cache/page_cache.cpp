@@ -451,6 +451,33 @@ PageCache::~PageCache() {
 
 uint64_t PageCache::frame() const { return impl_->frame.load(); }
 
+PageHandle PageCache::fetch_or_failed(const PageKey& key) {
+  try {
+    return fetch(key);
+  } catch (const Error&) {
+    std::string error;
+    {
+      std::lock_guard lock(impl_->queue_mutex);
+      auto f = impl_->failed.find(key);
+      if (f == impl_->failed.end()) throw;  // not a load that failed: the caller's mistake
+      error = f->second;
+    }
+    PageHandle h;
+    set_failed(h, key, std::move(error));
+    return h;
+  }
+}
+
+std::vector<PageCache::FailedPage> PageCache::failed_pages() const {
+  std::vector<FailedPage> out;
+  {
+    std::lock_guard lock(impl_->queue_mutex);
+    for (const auto& [key, error] : impl_->failed) out.push_back({key, error});
+  }
+  std::sort(out.begin(), out.end(), [](const FailedPage& a, const FailedPage& b) { return a.key < b.key; });
+  return out;
+}
+
 void PageCache::set_failed(PageHandle& h, const PageKey& key, std::string error) {
   h.key_ = key;
   h.state_ = PageHandle::State::failed;

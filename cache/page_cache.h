@@ -186,6 +186,11 @@ class PageCache {
   /// @brief Blocking access for tools, tests and reference renderers. Throws the load's
   /// Error for a corrupt record or a key outside the source.
   PageHandle fetch(const PageKey& key);
+  /// @brief fetch() that answers a page which cannot be read (corrupt, missing, unreadable)
+  /// with a failed handle (its error()) instead of throwing: for renderers, which draw around
+  /// such a page and report it (failed_pages()). Other errors (a kind the source does not
+  /// hold) still throw.
+  PageHandle fetch_or_failed(const PageKey& key);
   /// @brief Asks for a page without looking it up (prefetch, refinement requests).
   void request(const PageKey& key, float priority);
   /// @brief Whether a page is resident in L1 now (no pin, nothing counted).
@@ -213,6 +218,13 @@ class PageCache {
   void wait_idle();
   CacheStats stats() const;
   CacheStats stats(RecordKind kind) const;
+  /// @brief The pages that could not be read so far, each once, in key order, with the error
+  /// of their load (which names the source and the key).
+  struct FailedPage {
+    PageKey key;
+    std::string error;
+  };
+  std::vector<FailedPage> failed_pages() const;
 
  private:
   friend class PageHandle;

@@ -11,16 +11,28 @@
 ///
 /// Cell (i, j, k) is the cube between voxels (i, j, k) and (i+1, j+1, k+1); its corners
 /// beyond the last voxel clamp to it, so 1-voxel-thick volumes have flat cells.
+///
+/// A brick that cannot be read (corrupt or missing: the cache records it, and the render
+/// command reports it) is stood in for by the level above, trilinearly, up to the root; voxels
+/// no readable level holds are NaN, which no isovalue crosses and the transfer function
+/// takes as its lowest value. The other back ends follow the same rule: a coarser level where
+/// one can be read, else nothing.
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 
 #include "cache/brick_cache.h"
 #include "renderers/common/frame.h"
 
 namespace brickyard {
+
+namespace detail {
+template <typename V>
+V trilinear_wide(const V c[8], V ux, V uy, V uz);
+}  // namespace detail
 
 template <typename Stored>
 class CellAccessor {
@@ -53,6 +65,10 @@ class CellAccessor {
     }
     const Vec3s b = brick_of(i, j, k);
     bind(b);
+    if (damaged_) [[unlikely]] {
+      for (int n = 0; n < 8; ++n) c[n] = V(stand_in(i + (n & 1), j + ((n >> 1) & 1), k + ((n >> 2) & 1)));
+      return;
+    }
     if (!data_) {
       for (int n = 0; n < 8; ++n) c[n] = V(constant_);
       return;
@@ -79,6 +95,7 @@ class CellAccessor {
     k = std::clamp<int64_t>(k, 0, dims_.z - 1);
     const Vec3s b{i / M_, j / M_, k / M_};
     bind(b);
+    if (damaged_) [[unlikely]] return V(stand_in(i, j, k));
     if (!data_) return V(constant_);
     return V(data_[((k - b.z * M_ + A_) * E_ + (j - b.y * M_ + A_)) * E_ + (i - b.x * M_ + A_)]);
   }
@@ -95,12 +112,34 @@ class CellAccessor {
       ++counters_.hits;
     } else {
       ++counters_.misses;
-      handle_ = cache_.fetch(key);  // throws the load's Error (corrupt or missing brick)
+      handle_ = cache_.fetch_or_failed(key);
     }
-    data_ = handle_.constant() ? nullptr : handle_.voxels<Stored>();
+    damaged_ = handle_.failed();
+    data_ = handle_.constant() || damaged_ ? nullptr : handle_.voxels<Stored>();
     constant_ = handle_.constant_value();
     brick_ = b;
     bound_ = true;
+  }
+
+  /// Voxel (i, j, k) of this level (clamped into it) from the level above: its voxel i lies at
+  /// i / 2 - 1 / 4 there (voxel centres of a 2x2x2 average, dataset/grid.h). Out of line: only
+  /// damaged bricks take it.
+  [[gnu::noinline, gnu::cold]] double stand_in(int64_t i, int64_t j, int64_t k) {
+    if (level_ == 0) return std::numeric_limits<double>::quiet_NaN();
+    if (!coarser_) coarser_ = std::make_unique<CellAccessor>(cache_, counters_, level_ - 1);
+    const int64_t p[3] = {std::clamp<int64_t>(i, 0, dims_.x - 1), std::clamp<int64_t>(j, 0, dims_.y - 1),
+                          std::clamp<int64_t>(k, 0, dims_.z - 1)};
+    int64_t lo[3];
+    double u[3];
+    for (int a = 0; a < 3; ++a) {
+      const double x = std::clamp(0.5 * double(p[a]) - 0.25, 0.0, double(coarser_->dims()[a] - 1));
+      lo[a] = int64_t(x);
+      u[a] = x - double(lo[a]);
+    }
+    double c[8];
+    for (int n = 0; n < 8; ++n)
+      c[n] = coarser_->template voxel<double>(lo[0] + (n & 1), lo[1] + ((n >> 1) & 1), lo[2] + ((n >> 2) & 1));
+    return detail::trilinear_wide(c, u[0], u[1], u[2]);
   }
 
   BrickCache& cache_;
@@ -113,6 +152,8 @@ class CellAccessor {
   Vec3s brick_{-1};
   const Stored* data_ = nullptr;
   float constant_ = 0;
+  bool damaged_ = false;
+  std::unique_ptr<CellAccessor> coarser_;  // the stand-in level for damaged bricks, made on need
 };
 
 namespace detail {

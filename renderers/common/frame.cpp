@@ -100,7 +100,7 @@ std::string FrameStats::to_json() const {
   j["rays_per_second_per_thread"] = seconds > 0 && threads > 0 ? double(c.rays) / seconds / threads : 0.0;
   j["cache"] = {{"lookups", c.lookups}, {"hits", c.hits},       {"misses", c.misses},
                 {"requests", requests}, {"uploads", uploads},   {"stalls", stalls},
-                {"bytes_read", bytes_read}, {"bytes_decoded", bytes_decoded}};
+                {"bytes_read", bytes_read}, {"bytes_decoded", bytes_decoded}, {"unreadable", unreadable}};
   return j.dump(2);
 }
 

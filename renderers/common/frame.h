@@ -82,6 +82,7 @@ struct FrameStats {
   uint64_t stalls = 0;          ///< blocking fetches that waited for a load
   uint64_t bytes_read = 0;      ///< compressed bytes read from the store
   uint64_t bytes_decoded = 0;
+  uint64_t unreadable = 0;      ///< records found unreadable so far (corrupt or missing): drawn around, never retried
 
   /// Figures particular to the back end (working set, index size, culled nodes), by name.
   std::vector<std::pair<std::string, double>> backend;

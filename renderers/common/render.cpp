@@ -65,6 +65,7 @@ FrameStats render_frame(Renderer& renderer, const RenderContext& context, const 
   stats.stalls = after.stalls - before.stalls;
   stats.bytes_read = after.l3_bytes_read - before.l3_bytes_read;
   stats.bytes_decoded = after.l3_bytes_decoded - before.l3_bytes_decoded;
+  stats.unreadable = after.failed_keys;
   return stats;
 }
 

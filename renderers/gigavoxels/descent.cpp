@@ -85,7 +85,7 @@ void Tracer<Voxel>::march(const PrimaryRay& ray, RayState& s, RayRecorder& rec, 
     const Node node = p.node;
     const NodeFrame& frame = p.frame;
     const double scale = p.scale;
-    if (!node.constant() && !node.has_brick()) want = kWantsBrick;
+    if (!node.constant() && !node.has_brick() && !r.damaged(p.depth, p.c)) want = kWantsBrick;
     // The node's exit along the ray, in the node's frame.
     double t_exit = ray.span.t1;
     const int entry_axis = exit_axis;

@@ -270,6 +270,7 @@ Source::Fill GigaVoxelsRenderer<Voxel>::upload(uint32_t address, bool wait) {
   if (address != 0 && !tree_.brick_slot_available()) return Source::Fill::missing;  // the root's slot is always there
   scratch_.resize(tree_.brick_values());
   const Source::Fill filled = source_->fill(a, scratch_.data(), wait, float(a.depth));
+  if (filled == Source::Fill::failed) damaged_.insert({a.depth, a.x, a.y, a.z});
   if (filled != Source::Fill::filled) return filled;
   const uint32_t slot = tree_.allocate_brick(address);
   if (slot == kNoAddress) return Source::Fill::missing;

@@ -42,6 +42,8 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <set>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 #include <vector>
@@ -281,6 +283,12 @@ class GigaVoxelsRenderer final : public Renderer {
   std::unordered_set<uint32_t> transit_addresses_;  // in_transit_'s, rebuilt each pass (a member for its buckets)
   std::vector<float> scratch_;
   std::unordered_map<uint64_t, uint32_t> shared_;  // instanced brick id -> slot
+  // Nodes whose brick could not be read (corrupt or missing in the store): drawn from the
+  // bricks above them and never asked for again. Changed between passes only.
+  std::set<std::tuple<int, int64_t, int64_t, int64_t>> damaged_;
+  bool damaged(int depth, const int64_t c[3]) const {
+    return !damaged_.empty() && damaged_.contains({depth, c[0], c[1], c[2]});
+  }
   CompactionReport compaction_;
   uint64_t passes_ = 0, interrupted_ = 0, frame_subdivisions_ = 0, frame_uploads_ = 0, frame_requests_ = 0, frame_uses_ = 0;
   uint64_t last_pass_progress_ = 0, last_pass_requests_ = 0;

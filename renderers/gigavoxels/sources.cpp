@@ -46,7 +46,7 @@ class StoreSource final : public Source {
     const BrickKey k = store_key(a);
     // Past the budget a miss is not requested: the loader or the rays ask for it again later.
     const bool may_request = requests_left_ > 0;
-    BrickHandle h = wait ? ctx_.bricks().fetch(k) : ctx_.bricks().lookup(k, priority, may_request);
+    BrickHandle h = wait ? ctx_.bricks().fetch_or_failed(k) : ctx_.bricks().lookup(k, priority, may_request);
     const int64_t m = layout_.brick_size, e = m + 2;
     if (h.constant()) {  // a level's constant over a subtree that is not
       std::fill_n(out, e * e * e, h.constant_value());

@@ -44,6 +44,8 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr uint32_t kEmptyLeaf = 0xffffffffu;   // nothing to sample
 constexpr uint32_t kConstantLeaf = 0x80000000u; // | index into the frame's constants
+constexpr int32_t kNoData = -1;                 // a node's handle: no brick at hand
+constexpr int32_t kDamaged = -2;                // acquire(): the brick cannot be read
 
 struct GobbettiParams {
   double lod_ratio{};     // 0: the scene's quality.lod_ratio
@@ -135,6 +137,7 @@ class GobbettiRenderer final : public Renderer {
                      {"deferred_refinements", double(deferred_)},
                      {"occluded_not_refined", double(occluded_)},
                      {"pool_full_not_refined", double(pool_full_)},
+                     {"damaged_stood_in_for", double(damaged_)},
                      {"requests_posted", double(requests_)},
                      {"visibility_queries", double(queries_)},
                      {"refine_ms", refine_seconds_ * 1e3},
@@ -201,16 +204,21 @@ class GobbettiRenderer final : public Renderer {
     inner_.clear();
     constants_.clear();
     data_leaves_ = constant_leaves_ = 0;
-    deferred_ = occluded_ = requests_ = pool_full_ = 0;
+    deferred_ = occluded_ = requests_ = pool_full_ = damaged_ = 0;
     int budget = p_.upload_budget;
     // The cut keeps a quarter of the pool free: room for the loader's uploads and for the
     // uneven fill of the pool's shards, so that a full cut still lets new bricks in.
     const uint32_t capacity = cache.pool_slots() - cache.pool_slots() / 4;
     uint32_t pinned = 0;
 
-    // Asks for a node's brick: a pinned handle when resident, else a request (budget allowing).
+    // Asks for a node's brick: a pinned handle when resident, else a request (budget allowing);
+    // kDamaged for one that cannot be read, never asked for again.
     auto acquire = [&](const BrickKey& k, double pixels) -> int32_t {
       BrickHandle h = cache.lookup(k, float(pixels), /*request_on_miss=*/false);
+      if (h.failed()) {
+        ++damaged_;
+        return kDamaged;
+      }
       if (h.resident()) {
         handles_.push_back(std::move(h));
         ++pinned;
@@ -234,8 +242,9 @@ class GobbettiRenderer final : public Renderer {
       return;
     }
     const double root_pixels = voxel_pixels(root, cam, setup.height);
-    const int32_t root_handle = acquire(root, root_pixels);
-    if (root_handle < 0) {  // nothing to draw until the root arrives
+    int32_t root_handle = acquire(root, root_pixels);
+    if (root_handle == kDamaged) root_handle = kNoData;  // refined below: its children may be readable
+    else if (root_handle < 0) {  // nothing to draw until the root arrives
       ++deferred_;
       add_leaf(root, NodeUse::empty, -1);
       return;
@@ -246,6 +255,7 @@ class GobbettiRenderer final : public Renderer {
       NodeUse use;
       double pixels;
       int32_t handle;
+      bool stand_in = false;  // handle is an ancestor's: the child's brick cannot be read
     };
     std::vector<Child> children;
     while (!queue.empty()) {
@@ -253,7 +263,9 @@ class GobbettiRenderer final : public Renderer {
       queue.pop();
       // A level above coarsest_level_ is refined however small its voxels look: it has
       // collapsed an axis (a 3x3x300 grid's 1x1x75 level drew nothing).
-      const bool wants = int(n.key.level) < layout_.finest() && (n.pixels > lod_ratio_ || int(n.key.level) < coarsest_level_);
+      // So is a node no readable brick stands in for (a damaged root): below it is data.
+      const bool wants = int(n.key.level) < layout_.finest() &&
+                         (n.pixels > lod_ratio_ || int(n.key.level) < coarsest_level_ || n.handle == kNoData);
       if (!wants) {
         add_leaf(n.key, NodeUse::data, n.handle);
         continue;
@@ -287,12 +299,13 @@ class GobbettiRenderer final : public Renderer {
         for (Child& c : children)
           if (c.use == NodeUse::data) {
             c.handle = acquire(c.key, c.pixels);
-            ready &= c.handle >= 0;
+            if (c.handle == kDamaged) c.handle = n.handle, c.stand_in = true;  // the nearest readable level above
+            ready &= c.handle >= 0 || c.stand_in;
           }
       if (!ready) {
         ++deferred_;
         for (Child& c : children)
-          if (c.handle >= 0) {
+          if (c.handle >= 0 && !c.stand_in) {
             handles_[size_t(c.handle)].release();
             --pinned;
           }
@@ -318,8 +331,11 @@ class GobbettiRenderer final : public Renderer {
     last_uploads_ = uploads;
     // Data pointers of the leaves, read by the render threads.
     data_.assign(handles_.size(), nullptr);
-    for (size_t i = 0; i < handles_.size(); ++i)
+    data_keys_.resize(handles_.size());
+    for (size_t i = 0; i < handles_.size(); ++i) {
       if (handles_[i].resident()) data_[i] = handles_[i].template voxels<Stored>();
+      data_keys_[i] = handles_[i].key();
+    }
   }
 
   // --- visibility feedback -----------------------------------------------------------------
@@ -471,14 +487,16 @@ class GobbettiRenderer final : public Renderer {
     Brick brick_of(const gobbetti::LeafVisit& leaf, const PrimaryRay& ray) const {
       Brick b;
       b.data = r.data_[leaf.payload];
-      b.level = int(leaf.key.level);
+      // The brick's own key: a damaged leaf's is an ancestor's (a coarser level stands in).
+      const BrickKey& key = r.data_keys_[leaf.payload];
+      b.level = int(key.level);
       b.e = r.E_;
       b.wide = r.wide_values_;
       const double inv_scale = 1.0 / double(int64_t(1) << r.layout_.steps(b.level));
       b.inv_scale = float(inv_scale);
       const Vec3s level_dims = r.layout_.level_dims(b.level);
       for (int a = 0; a < 3; ++a) {
-        const int64_t offset = leaf.key.coords()[a] * r.M_ - r.A_;
+        const int64_t offset = key.coords()[a] * r.M_ - r.A_;
         b.lo[a] = float((ray.org[a] + 0.5) * inv_scale - 0.5 - double(offset));
         b.ld[a] = float(ray.dir[a] * inv_scale);
         const int64_t first = std::max<int64_t>(-offset, 0), last = std::min<int64_t>(level_dims[a] - 1 - offset, b.e - 1);
@@ -694,12 +712,14 @@ class GobbettiRenderer final : public Renderer {
   uint64_t frame_ = 0;
   std::vector<BrickHandle> handles_;
   std::vector<const Stored*> data_;
+  std::vector<BrickKey> data_keys_;  // the key of each of handles_
   std::vector<float> constants_;
   std::vector<gobbetti::CutLeaf> leaves_;
   std::vector<BrickKey> inner_;  // the cut's refined nodes, for visibility propagation
   gobbetti::SpatialIndex index_;
   mutable FloatImage occlusion_;  // where each ray became opaque; pixels are written by one tile each
   uint64_t data_leaves_ = 0, constant_leaves_ = 0, deferred_ = 0, occluded_ = 0, requests_ = 0, queries_ = 0, pool_full_ = 0;
+  uint64_t damaged_ = 0;  // nodes of the cut whose brick cannot be read: an ancestor's stands in
   double refine_seconds_ = 0, index_seconds_ = 0, visibility_seconds_ = 0;
   uint64_t last_uploads_ = 0;
   int stalled_frames_ = 0;

@@ -131,12 +131,14 @@ Hit Tracer<T>::trace(const Vec3d& o, const Vec3d& d, Interval<double> span) {
 template <typename T>
 bool Tracer<T>::descend(const Node<T>& n, const Vec3d& o, const Vec3d& d, const Vec3d& inv, Interval<double> span, Hit& best) {
   ++counters.nodes;
+  if (n.depth < 0) return false;  // none(): an unreadable root page
   const Interval<double> s = node_span(n, o, inv, span);
   if (s.t0 > s.t1 || s.t0 >= best.t) return false;
   if (!crosses(n.min, n.max)) return false;
   if (n.unread_page) {
     Node<T> read = n;
     read.page = page(n.unread_page);
+    if (!read.page) return false;  // unreadable: its subtree is left empty
     read.unread_page = 0;
     return descend(read, o, d, inv, span, best);
   }

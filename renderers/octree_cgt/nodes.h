@@ -122,6 +122,7 @@ template <typename T>
 Node<T> Tracer<T>::root() {
   Node<T> n;
   n.page = page(OctreeLayout::page_id(0, Vec3s(0)));
+  if (!n.page) return Node<T>::none();  // the root page cannot be read: nothing to draw
   n.min = n.page->nodes[0][0].min, n.max = n.page->nodes[0][0].max;
   return n;
 }

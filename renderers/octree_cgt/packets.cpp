@@ -169,6 +169,7 @@ template <typename T>
 template <int W>
 void Tracer<T>::descend_packet(Packet& p, const Node<T>& n, const LaneSet& parent_lanes, int K, int U, int V) {
   ++counters.nodes;
+  if (n.depth < 0) return;  // none(): an unreadable root page
   if (!crosses(n.min, n.max)) return;
   const Box3d box = node_box(n);
   if (!packet_meets(p, box.lo, box.hi, K, U, V)) return;
@@ -177,6 +178,7 @@ void Tracer<T>::descend_packet(Packet& p, const Node<T>& n, const LaneSet& paren
   if (n.unread_page) {
     Node<T> read = n;
     read.page = page(n.unread_page);
+    if (!read.page) return;  // unreadable: its subtree is left empty
     read.unread_page = 0;
     on_path(read);
     lod_leaf(read) ? leaf_cells<W>(p, read, lanes, K, U, V) : descend_children<W>(p, read, lanes, K, U, V);

@@ -15,7 +15,9 @@
 namespace brickyard::octree_cgt {
 
 /// The pages a tile has fetched, pinned and parsed, until a ray starts with more than
-/// `capacity` held (never during a ray: its nodes point into them).
+/// `capacity` held (never during a ray: its nodes point into them). A page that cannot be
+/// read is null: the octree walk stands its parent's scalars in for it (octree_walk.h), the
+/// descent leaves its subtree empty.
 template <typename T>
 class PageMemo {
  public:
@@ -34,7 +36,8 @@ class PageMemo {
     ++counters_.bricks;  // a page visit
     auto e = std::make_unique<Entry>();
     e->id = id;
-    e->handle = cache_.fetch({RecordKind::octree_page, id});
+    e->handle = cache_.fetch_or_failed({RecordKind::octree_page, id});
+    if (e->handle.failed()) return nullptr;  // unreadable: the cache reports it, the tracer draws around it
     e->view = OctreePage<T>::view({e->handle.bytes(), page_bytes_}, layout_);
     entries_.push_back(std::move(e));
     if (entries_.size() - 1 < size_t(INT16_MAX)) slot = int16_t(entries_.size() - 1);

@@ -208,9 +208,8 @@ class TetReference final : public Renderer {
   PageHandle fetch(uint64_t c, RayCounters& counters) const {
     ++counters.bricks;
     ++counters.lookups;
-    PageHandle h = ctx_.pages().fetch({RecordKind::tet_cluster, c});
-    if (h.failed()) throw Error(Errc::corrupt, h.error()).with_file(ctx_.dataset().name).with_key(fmt::format("cluster {}", c));
-    return h;
+    // An unreadable cluster is failed: its tets are left out, and the cache reports it.
+    return ctx_.pages().fetch_or_failed({RecordKind::tet_cluster, c});
   }
 
   /// Clusters the ray o + t d meets in [t0, t1] that can contribute, nearest entry first.
@@ -243,6 +242,7 @@ class TetReference final : public Renderer {
     for (const auto& [entry, c] : clusters_along(o, d, t0, t1, counters)) {
       if (entry > hit.t) break;
       const PageHandle h = fetch(c, counters);
+      if (h.failed()) continue;
       const TetClusterPage page = TetClusterPage::view({h.bytes(), tets_.page_bytes()});
       const ClusterIndex& index = index_of(c, page);
       index.tets.traverse(o, inv, t0, [&] { return std::min(t1, hit.t); }, [&](uint32_t t) {
@@ -319,6 +319,7 @@ class TetReference final : public Renderer {
     const Vec3d inv = Vec3d(1.0) / d;
     for (const auto& [entry, c] : clusters_along(o, d, t0, t1, counters)) {
       const PageHandle h = fetch(c, counters);
+      if (h.failed()) continue;
       const TetClusterPage page = TetClusterPage::view({h.bytes(), tets_.page_bytes()});
       const float* val = page.values_at(step_);
       index_of(c, page).tets.traverse(o, inv, t0, [&] { return t1; }, [&](uint32_t t) {

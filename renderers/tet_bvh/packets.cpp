@@ -404,11 +404,11 @@ uint64_t TetBvhRenderer::trace(Packet& p, RayCounters& counters) const {
       if (!h.resident() && !h.failed() && frame_exact_) {
         // A tile in focus (passes made no progress: L1 holds less than its rays need at once)
         // waits for each cluster where it needs it; other tiles ask between passes.
-        if (current_tile == focus_tile_) h = ctx_.pages().fetch({RecordKind::tet_cluster, cluster});
+        if (current_tile == focus_tile_) h = ctx_.pages().fetch_or_failed({RecordKind::tet_cluster, cluster});
         else note_missing(cluster, priority, current_tile);
       }
       if (!h.resident()) {
-        if (h.failed()) throw Error(Errc::corrupt, h.error()).with_file(ctx_.dataset().name).with_key(fmt::format("cluster {}", cluster));
+        if (h.failed()) continue;  // unreadable: its tets are left out (the cache reports it)
         ++c.missing;
         ++counters.misses;
         // What each ray has passed before this cluster is certain; from its entry on, not.

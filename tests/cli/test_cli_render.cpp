@@ -15,7 +15,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/brick_key.h"
 #include "core/image.h"
+#include "store_damage.h"
 #include "test_util.h"
 
 namespace brickyard {
@@ -119,6 +121,39 @@ TEST_F(CliRender, AnOutputThatIsNotARegularFileIsRefusedAndLeftAsItIs) {
   }
   const auto r = brickyard("render " + scene + " -o " + fifo);
   EXPECT_THAT(r.output, HasSubstr(fifo + ": exists and is a FIFO"));
+}
+
+TEST(CliDamaged, RenderAndFlightNameUnreadableBricksAndExit3UnlessAllowed) {
+  testing::TempDir dir;
+  const std::string store = dir.file("s.store");
+  ASSERT_EQ(brickyard("-q import field:sphere --size 32 --type f32 --brick-size 16 --out " + store).exit_code, 0);
+  // The finest brick facing the camera.
+  const BrickKey key{1, 1, 0, 1};
+  testing::damage_record(store, "bricks", key.code());
+  std::ofstream(dir.file("scene.json")) << "{\"dataset\": \"s.store\", \"image\": {\"width\": 32, \"height\": 32}, " << kCamera
+                                       << ", " << kIso << R"(, "quality": {"lod_ratio": 0.01}})" << "\n";
+  for (const std::string backend : {"raymarch", "reference", "gobbetti", "gigavoxels"}) {
+    const std::string png = dir.file(backend + ".png");
+    const auto r = brickyard("render " + dir.file("scene.json") + " --backend " + backend + " -o " + png + " --stats " +
+                             dir.file(backend + ".json"));
+    EXPECT_EQ(r.exit_code, 3) << backend << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr("error: 1 record of the store could not be read")) << backend;
+    EXPECT_THAT(r.output, HasSubstr(store + ": key " + key.to_string() + ": checksum mismatch")) << backend;
+    EXPECT_THAT(r.output, HasSubstr("--allow-damaged")) << backend;
+    EXPECT_TRUE(fs::exists(png)) << backend << ": the image is still written";
+    const nlohmann::json stats = nlohmann::json::parse(testing::read_file(dir.file(backend + ".json")));
+    ASSERT_EQ(stats["unreadable"].size(), 1u) << backend;
+    EXPECT_EQ(stats["frames"][0]["cache"]["unreadable"].get<int>(), 1) << backend;
+  }
+  auto r = brickyard("render " + dir.file("scene.json") + " --allow-damaged -o " + dir.file("allowed.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("warning: 1 record of the store could not be read"));
+  // flight asks for every brick it would draw: the same report, the same exit status.
+  r = brickyard("flight " + store + " --path " + std::string(BRICKYARD_SOURCE_DIR) + "/scenes/flight-orbit.json --frames 2 --lod 0.01");
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(store + ": key " + key.to_string() + ": checksum mismatch"));
+  r = brickyard("flight " + store + " --path " + std::string(BRICKYARD_SOURCE_DIR) + "/scenes/flight-orbit.json --frames 2 --lod 0.01 --allow-damaged");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
 }
 
 TEST_F(CliRender, CameraPathFramesAreNumbered) {
