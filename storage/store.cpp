@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include <fmt/format.h>
+#include <xxhash.h>
 
 #include "core/error.h"
 #include "storage/page_codec.h"
@@ -16,6 +17,59 @@ namespace {
 namespace fs = std::filesystem;
 constexpr size_t kNodesPerChunk = 65536;  // 1 MiB node-table records
 const std::string kManifestKey = "manifest";
+// The XXH3-64 of the manifest's text, little-endian, beside it: a flipped bit in the manifest
+// would otherwise be read as another volume (other dims, spacing or value range).
+const std::string kManifestChecksumKey = "manifest.xxh3";
+// Table chunks (node table, octree page table, cluster table, time-step ranges) end in the
+// XXH3-64 of their records, little-endian: a flipped bit in a node's range would otherwise skip
+// its brick or draw a constant that is not there, unseen. Chunks without it (stores written
+// before) are read unchecked.
+constexpr size_t kTableChecksumBytes = 8;
+
+uint64_t read_le64(const std::byte* p) {
+  uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v |= uint64_t(p[i]) << (8 * i);
+  return v;
+}
+std::array<std::byte, 8> le64(uint64_t v) {
+  std::array<std::byte, 8> b;
+  for (int i = 0; i < 8; ++i) b[size_t(i)] = std::byte((v >> (8 * i)) & 0xff);
+  return b;
+}
+
+/// A table chunk's records followed by their checksum.
+std::vector<std::byte> checksummed_chunk(const void* records, size_t bytes) {
+  const auto* p = static_cast<const std::byte*>(records);
+  std::vector<std::byte> v(p, p + bytes);
+  const auto sum = le64(XXH3_64bits(records, bytes));
+  v.insert(v.end(), sum.begin(), sum.end());
+  return v;
+}
+
+/// Copies a table chunk of `bytes` bytes of records into `out`, checking its size and, where
+/// it has one, its checksum. `what` names the chunk in errors.
+void read_table_chunk(const std::optional<std::span<const std::byte>>& value, size_t bytes, const std::string& what,
+                      const std::string& dir, void* out) {
+  if (!value || (value->size() != bytes && value->size() != bytes + kTableChecksumBytes))
+    throw Error(Errc::corrupt, fmt::format("{} is {}", what,
+                                           value ? fmt::format("{} bytes, expected {}", value->size(), bytes + kTableChecksumBytes)
+                                                 : "missing"))
+        .with_file(dir);
+  if (value->size() == bytes + kTableChecksumBytes) {
+    const uint64_t stored = read_le64(value->data() + bytes), actual = XXH3_64bits(value->data(), bytes);
+    if (stored != actual)
+      throw Error(Errc::corrupt, fmt::format("{} fails its checksum: stored {:016x}, computed {:016x}", what, stored, actual))
+          .with_file(dir);
+  }
+  std::memcpy(out, value->data(), bytes);
+}
+
+/// Writes the manifest's text and its checksum (in the writer's next transaction).
+void put_manifest(lmdb::BatchWriter& writer, const lmdb::Database& db, const std::string& text) {
+  writer.put(db, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(text));
+  const auto sum = le64(XXH3_64bits(text.data(), text.size()));
+  writer.put(db, lmdb::as_bytes(kManifestChecksumKey), std::span<const std::byte>(sum.data(), sum.size()));
+}
 
 std::array<std::byte, 8> node_chunk_key(uint32_t level, uint32_t chunk) {
   std::array<std::byte, 8> k{};
@@ -138,6 +192,16 @@ Manifest load_manifest(lmdb::Env& env, const lmdb::Database& db, const std::stri
   lmdb::ReadTxn txn(env);
   auto text = txn.get(db, lmdb::as_bytes(kManifestKey));
   if (!text) throw Error(Errc::format, "not a brickyard store (empty manifest database)").with_file(dir);
+  if (auto sum = txn.get(db, lmdb::as_bytes(kManifestChecksumKey))) {
+    const uint64_t actual = XXH3_64bits(text->data(), text->size());
+    if (sum->size() != 8 || read_le64(sum->data()) != actual)
+      throw Error(Errc::corrupt, fmt::format("the manifest fails its checksum: stored {}, computed {:016x}",
+                                             sum->size() == 8 ? fmt::format("{:016x}", read_le64(sum->data()))
+                                                              : fmt::format("{} bytes", sum->size()),
+                                             actual))
+          .with_file(dir)
+          .with_key("manifest");
+  }
   return Manifest::from_json(std::string(reinterpret_cast<const char*>(text->data()), text->size()), dir);
 }
 }  // namespace
@@ -208,14 +272,9 @@ void Store::load_node_table() {
     auto& records = nodes_.level(level);
     for (size_t start = 0, chunk = 0; start < records.size(); start += kNodesPerChunk, ++chunk) {
       const auto key = node_chunk_key(uint32_t(level), uint32_t(chunk));
-      auto value = txn.get(nodes_db_, key);
       const size_t n = std::min(kNodesPerChunk, records.size() - start);
-      if (!value || value->size() != n * sizeof(NodeRecord))
-        throw Error(Errc::corrupt,
-                    fmt::format("node table chunk {} of level {} is {}", chunk, level,
-                                value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(NodeRecord)) : "missing"))
-            .with_file(dir);
-      std::memcpy(records.data() + start, value->data(), value->size());
+      read_table_chunk(txn.get(nodes_db_, key), n * sizeof(NodeRecord), fmt::format("node table chunk {} of level {}", chunk, level),
+                       dir, records.data() + start);
     }
   }
 }
@@ -224,14 +283,9 @@ void Store::load_octree_table() {
   octree_pages_.resize(size_t(manifest_.octree->pages));
   lmdb::ReadTxn txn(*env_);
   for (size_t start = 0, chunk = 0; start < octree_pages_.size(); start += kNodesPerChunk, ++chunk) {
-    auto value = txn.get(octree_db_, big_endian_id(kOctreeTableKey | chunk));
     const size_t n = std::min(kNodesPerChunk, octree_pages_.size() - start);
-    if (!value || value->size() != n * sizeof(OctreePageRange))
-      throw Error(Errc::corrupt, fmt::format("octree page table chunk {} is {}", chunk,
-                                             value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(OctreePageRange))
-                                                   : "missing"))
-          .with_file(path_);
-    std::memcpy(octree_pages_.data() + start, value->data(), value->size());
+    read_table_chunk(txn.get(octree_db_, big_endian_id(kOctreeTableKey | chunk)), n * sizeof(OctreePageRange),
+                     fmt::format("octree page table chunk {}", chunk), path_, octree_pages_.data() + start);
   }
   for (size_t i = 1; i < octree_pages_.size(); ++i)
     if (!(octree_pages_[i - 1].id < octree_pages_[i].id))
@@ -250,27 +304,17 @@ void Store::load_cluster_table() {
   clusters_.resize(size_t(manifest_.mesh.clusters));
   lmdb::ReadTxn txn(*env_);
   for (size_t start = 0, chunk = 0; start < clusters_.size(); start += kNodesPerChunk, ++chunk) {
-    auto value = txn.get(clusters_db_, big_endian_id(chunk));
     const size_t n = std::min(kNodesPerChunk, clusters_.size() - start);
-    if (!value || value->size() != n * sizeof(TetCluster))
-      throw Error(Errc::corrupt, fmt::format("cluster table chunk {} is {}", chunk,
-                                             value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(TetCluster))
-                                                   : "missing"))
-          .with_file(dir);
-    std::memcpy(clusters_.data() + start, value->data(), value->size());
+    read_table_chunk(txn.get(clusters_db_, big_endian_id(chunk)), n * sizeof(TetCluster), fmt::format("cluster table chunk {}", chunk),
+                     dir, clusters_.data() + start);
   }
   if (manifest_.time_steps > 1) {
     const size_t per_chunk = kNodesPerChunk, steps = size_t(manifest_.time_steps);
     step_ranges_.resize(clusters_.size() * steps);
     for (size_t start = 0, chunk = 0; start < step_ranges_.size(); start += per_chunk, ++chunk) {
-      auto value = txn.get(clusters_db_, step_ranges_key(chunk));
       const size_t n = std::min(per_chunk, step_ranges_.size() - start);
-      if (!value || value->size() != n * sizeof(TetStepRange))
-        throw Error(Errc::corrupt, fmt::format("time-step range chunk {} is {}", chunk,
-                                               value ? fmt::format("{} bytes, expected {}", value->size(), n * sizeof(TetStepRange))
-                                                     : "missing"))
-            .with_file(dir);
-      std::memcpy(step_ranges_.data() + start, value->data(), value->size());
+      read_table_chunk(txn.get(clusters_db_, step_ranges_key(chunk)), n * sizeof(TetStepRange),
+                       fmt::format("time-step range chunk {}", chunk), dir, step_ranges_.data() + start);
     }
   }
   const uint32_t steps = uint32_t(manifest_.time_steps), sets = manifest_.mesh.position_sets(manifest_.time_steps);
@@ -483,7 +527,7 @@ StoreWriter::StoreWriter(const std::string& dir, const Manifest& initial, const 
   Manifest m = initial;
   m.complete = false;
   if (kind_ == DataKind::tetrahedral) m.format_version = std::max(m.format_version, kStoreFormatVersion);
-  writer_->put(manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(m.to_json()));
+  put_manifest(*writer_, manifest_db_, m.to_json());
   writer_->commit();
 }
 
@@ -513,9 +557,8 @@ void StoreWriter::finish(const Manifest& final_manifest, const NodeTable& nodes)
     const auto& records = nodes.level(level);
     for (size_t start = 0, chunk = 0; start < records.size(); start += kNodesPerChunk, ++chunk) {
       const size_t n = std::min(kNodesPerChunk, records.size() - start);
-      const auto* bytes = reinterpret_cast<const std::byte*>(records.data() + start);
       writer_->put(nodes_db_, node_chunk_key(uint32_t(level), uint32_t(chunk)),
-                   std::span<const std::byte>(bytes, n * sizeof(NodeRecord)));
+                   checksummed_chunk(records.data() + start, n * sizeof(NodeRecord)));
     }
   }
   commit_final(final_manifest);
@@ -530,14 +573,12 @@ void StoreWriter::finish(const Manifest& final_manifest, const std::vector<TetCl
   env_->sync();  // every cluster page is durable before anything claims the store is complete
   for (size_t start = 0, chunk = 0; start < clusters.size(); start += kNodesPerChunk, ++chunk) {
     const size_t n = std::min(kNodesPerChunk, clusters.size() - start);
-    const auto* bytes = reinterpret_cast<const std::byte*>(clusters.data() + start);
-    writer_->put(clusters_db_, big_endian_id(chunk), std::span<const std::byte>(bytes, n * sizeof(TetCluster)));
+    writer_->put(clusters_db_, big_endian_id(chunk), checksummed_chunk(clusters.data() + start, n * sizeof(TetCluster)));
   }
   if (final_manifest.time_steps > 1)
     for (size_t start = 0, chunk = 0; start < step_ranges.size(); start += kNodesPerChunk, ++chunk) {
       const size_t n = std::min(kNodesPerChunk, step_ranges.size() - start);
-      const auto* bytes = reinterpret_cast<const std::byte*>(step_ranges.data() + start);
-      writer_->put(clusters_db_, step_ranges_key(chunk), std::span<const std::byte>(bytes, n * sizeof(TetStepRange)));
+      writer_->put(clusters_db_, step_ranges_key(chunk), checksummed_chunk(step_ranges.data() + start, n * sizeof(TetStepRange)));
     }
   Manifest m = final_manifest;
   m.format_version = std::max(m.format_version, kStoreFormatVersion);
@@ -548,7 +589,7 @@ void StoreWriter::commit_final(Manifest m) {
   m.complete = true;
   // One transaction: the table and the complete flag appear together or not at all.
   const std::string text = m.to_json();
-  writer_->put(manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(text));
+  put_manifest(*writer_, manifest_db_, text);
   env_->set_no_sync(false);
   writer_->commit();
 }
@@ -563,7 +604,7 @@ OctreeWriter::OctreeWriter(Store& store, uint64_t batch_bytes) : store_(store) {
   if (store.manifest_.octree) {  // the manifest stops claiming the old octree before its pages go
     Manifest m = store.manifest_;
     m.octree.reset();
-    writer_->put(store.manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(m.to_json()));
+    put_manifest(*writer_, store.manifest_db_, m.to_json());
     writer_->commit();
     store.manifest_ = m;
   }
@@ -587,12 +628,11 @@ void OctreeWriter::finish(const OctreeSummary& summary, std::vector<OctreePageRa
   store_.env_->sync();  // every page is durable before the manifest claims the octree
   for (size_t start = 0, chunk = 0; start < pages.size(); start += kNodesPerChunk, ++chunk) {
     const size_t n = std::min(kNodesPerChunk, pages.size() - start);
-    const auto* bytes = reinterpret_cast<const std::byte*>(pages.data() + start);
-    writer_->put(store_.octree_db_, big_endian_id(kOctreeTableKey | chunk), std::span<const std::byte>(bytes, n * sizeof(OctreePageRange)));
+    writer_->put(store_.octree_db_, big_endian_id(kOctreeTableKey | chunk), checksummed_chunk(pages.data() + start, n * sizeof(OctreePageRange)));
   }
   Manifest m = store_.manifest_;
   m.octree = summary;
-  writer_->put(store_.manifest_db_, lmdb::as_bytes(kManifestKey), lmdb::as_bytes(m.to_json()));
+  put_manifest(*writer_, store_.manifest_db_, m.to_json());
   writer_->commit();
   store_.env_->sync();
   store_.manifest_ = m;

@@ -15,9 +15,12 @@
 #include <thread>
 #include <vector>
 
+#include <fmt/format.h>
+
 #include "preprocess/builder_test_util.h"
 #include "storage/store.h"
 #include "storage/lmdb_env.h"
+#include "store_damage.h"
 #include "test_util.h"
 
 extern char** environ;
@@ -210,6 +213,7 @@ TEST(CliStore, DirectoriesThatAreNotStoresAndNewerFormatsAreRefused) {
     text.replace(text.find("\"format_version\": 1"), 19, "\"format_version\": 99");
     lmdb::BatchWriter w(env);
     w.put(db, lmdb::as_bytes("manifest"), lmdb::as_bytes(text));
+    w.erase(db, lmdb::as_bytes("manifest.xxh3"));  // as a build that checks no checksum wrote it
     w.commit();
   }
   r = brickyard("info " + dir.file("s"));
@@ -230,6 +234,39 @@ TEST(CliStore, VerifyNamesACorruptedBrick) {
   const std::string key = BrickKey{h.level, h.x, h.y, h.z}.to_string();
   EXPECT_TRUE(contains(r.output, "BAD " + key + ": ")) << key << " not named in:\n" << r.output;
   EXPECT_TRUE(contains(r.output, "1 problems")) << r.output;
+}
+
+TEST(CliStore, AFlippedBitInTheManifestOrATableIsACorruptStoreNamedAsSuch) {
+  // Before, the tables and the manifest had no checksum: a flipped bit in a node's range
+  // skipped its brick, or drew a constant that is not there, with nothing said.
+  testing::TempDir dir;
+  const std::string clean = dir.file("clean");
+  ASSERT_EQ(brickyard("-q import field:fbm --size 40 --type f32 --brick-size 16 --octree --out " + clean).exit_code, 0);
+  struct Case {
+    std::string database;
+    std::vector<std::byte> key;
+    std::string named;
+  };
+  const std::string manifest = "manifest";
+  const std::vector<Case> cases = {
+      {"manifest", std::vector<std::byte>(reinterpret_cast<const std::byte*>(manifest.data()),
+                                          reinterpret_cast<const std::byte*>(manifest.data() + manifest.size())),
+       "the manifest fails its checksum"},
+      {"nodes", testing::big_endian_key(uint64_t(2) << 32), "node table chunk 0 of level 2 fails its checksum"},  // level 2, chunk 0
+      {"octree", testing::big_endian_key(uint64_t(0xff) << 56), "octree page table chunk 0 fails its checksum"},
+  };
+  for (const Case& c : cases)
+    for (uint64_t bit : {uint64_t(5), uint64_t(123), uint64_t(1) << 40}) {  // the last: the record's last byte
+      const std::string store = dir.file(fmt::format("{}_{}", c.database, bit));
+      std::filesystem::copy(clean, store);
+      ASSERT_GT(testing::flip_record_bit(store, c.database, c.key, bit), 0u);
+      for (const std::string& command : {"info", "verify"}) {
+        const auto r = brickyard(command + " " + store);
+        EXPECT_EQ(r.exit_code, 1) << command << " " << store << "\n" << r.output;
+        EXPECT_TRUE(contains(r.output, store + ": ")) << r.output;
+        EXPECT_TRUE(contains(r.output, c.named)) << c.named << " not in:\n" << r.output;
+      }
+    }
 }
 
 TEST(CliStore, KilledImportLeavesAnIncompleteStoreAndTheRerunEqualsACleanBuild) {
