@@ -424,7 +424,7 @@ PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::spa
   try {
     used = decode_page(key, *rec, out);
   } catch (Error& e) {
-    e.with_file(path_);
+    e.with_file(path_).with_key(describe(key));  // "cluster 18", as verify names it
     throw;
   }
   const TetCluster& c = clusters_[key.id];
