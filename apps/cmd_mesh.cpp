@@ -14,6 +14,7 @@
 
 #include "apps/commands.h"
 #include "apps/parse.h"
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/progress.h"
@@ -271,6 +272,7 @@ void export_mesh(const Store& store, const std::string& out, const std::string& 
   else
     throw Error(Errc::invalid_argument, fmt::format("'{}' is not ascii, binary, appended, base64 or zlib", encoding))
         .with_field("--encoding");
+  check_writable(out);  // before the whole mesh is gathered
   const TetMesh mesh = gather_mesh(store);
   write_vtu(out, mesh, w);
   std::cout << fmt::format("wrote {} ({} tets, {} vertices, {} time step{})\n", out, mesh.tet_count(), mesh.vertex_count(),

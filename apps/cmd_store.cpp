@@ -14,6 +14,7 @@
 
 #include "apps/commands.h"
 #include "apps/parse.h"
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/progress.h"
@@ -46,7 +47,7 @@ struct ImportOptions {
   std::string grid;
   // build
   int brick_size = 32, apron = 1, hc_level = 9;
-  std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size;
+  std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size, transaction_size;
   double constant_tolerance = 0;
   bool no_shuffle = false, no_map_growth = false, force = false, octree = false;
   // meshes
@@ -140,6 +141,7 @@ void run_import(const ImportOptions& o) {
   b.constant_tolerance = o.constant_tolerance;
   if (!o.range.empty()) b.clamp = parse_range(o.range, "--range");
   if (!o.map_size.empty()) b.map_size = parse_bytes(o.map_size, "--map-size");
+  if (!o.transaction_size.empty()) b.batch_bytes = parse_bytes(o.transaction_size, "--transaction-size");
   b.map_growth = !o.no_map_growth;
   b.force = o.force;
 
@@ -370,6 +372,7 @@ void run_export(const std::string& path, int level, const std::string& box_text,
   }
   if (level < 0) level = store.layout().finest();
   const VoxelBox region = export_region(store, level, box);
+  check_writable(out);  // the VDB writer opens its file only after the whole export
   Progress progress(fmt::format("export level {}", level), uint64_t(volume(region.size())), "voxels");
   if (has_extension(out, {".vdb"})) {
     export_vdb(store, level, region, out, grid, &progress);
@@ -444,6 +447,10 @@ void add_store_commands(CLI::App& app, int& exit_status) {
         ->capture_default_str()->group(build);
     cmd->add_option("--map-size", o->map_size, "Initial LMDB map size, e.g. 64MiB (default: from the input size)")->group(build);
     cmd->add_flag("--no-map-growth", o->no_map_growth, "Fail instead of growing the map when it is full")->group(build);
+    cmd->add_option("--transaction-size", o->transaction_size,
+                    "Bricks committed per LMDB transaction, e.g. 1MiB (default 32MiB; small ones let crash drills "
+                    "land kills mid-commit)")
+        ->group(build);
     cmd->add_flag("--octree", o->octree, "Also build the octree volume (lossless; see build-octree for its options)")
         ->group(build);
     cmd->add_flag("--force", o->force, "Rebuild a complete store made from another source or with other parameters")

@@ -170,6 +170,7 @@ const Trace& flight_trace() {
       c.trace_path = path;
       GridCache cache(store, c);
       fly(cache.bricks(), CameraPath::load(BRICKYARD_SOURCE_DIR "/scenes/flight-orbit.json"), {});
+      cache.close();  // writes the trace, or says why it cannot
     }
     return read_trace(path);
   }();

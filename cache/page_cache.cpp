@@ -17,6 +17,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/thread_stripe.h"
 #include "core/timing.h"
@@ -269,6 +270,8 @@ PageCache::PageCache(const PageSource& source, const CacheConfig& config)
   if (config.loader_threads < 1 || config.loader_threads > 256)
     throw Error(Errc::invalid_argument, fmt::format("{} loader threads (need 1 to 256)", config.loader_threads))
         .with_field("loader_threads");
+  // Before the pools are allocated, and long before the trace is written at close().
+  if (!config.trace_path.empty()) check_writable(config.trace_path);
   const std::vector<PageKindInfo> held = source.page_kinds();
   if (held.empty()) throw Error(Errc::invalid_argument, "the source holds no pages").with_file(source.source_name());
   size_t listed = 0;
@@ -433,19 +436,30 @@ void PageCache::drain_ready() {
   }
 }
 
-PageCache::~PageCache() {
+void PageCache::stop_loader() {
   {
     std::lock_guard lock(impl_->queue_mutex);
     impl_->stop = true;
   }
   impl_->work_cv.notify_all();
+  impl_->idle_cv.notify_all();
   for (auto& t : impl_->workers) t.join();
-  if (impl_->trace) {
-    try {
-      impl_->trace->write();
-    } catch (...) {
-      // A destructor must not throw; the trace is lost, the data is not.
-    }
+  impl_->workers.clear();
+}
+
+void PageCache::close() {
+  stop_loader();  // first: the loader records fills until it stops
+  // Taken before writing, so that a failed write is reported once, here, and not retried by
+  // the destructor.
+  if (const std::unique_ptr<TraceRecorder> trace = std::move(impl_->trace)) trace->write();
+}
+
+PageCache::~PageCache() {
+  try {
+    close();
+  } catch (...) {
+    // A destructor must not throw; the trace is lost, the data is not. Callers that say the
+    // trace was written call close() and see this error.
   }
 }
 
@@ -736,7 +750,7 @@ void PageCache::wait_idle() {
   }
   m.work_cv.notify_all();
   std::unique_lock lock(m.queue_mutex);
-  m.idle_cv.wait(lock, [&] { return idle_locked(); });
+  m.idle_cv.wait(lock, [&] { return m.stop || idle_locked(); });  // closed: nothing will be served
 }
 
 CacheStats PageCache::kind_stats(const Kind& k) const {

@@ -19,8 +19,10 @@
 /// Requests are data (STYLE.md 7): render threads append them to striped per-frame lists that
 /// the loader drains, and frame_requests() shows exactly what the last frame asked for.
 ///
-/// Lifetime: the PageSource must outlive the cache. Destroying the cache stops its loader
-/// (requests in flight finish or are dropped, nothing half-inserted) and writes its trace.
+/// Lifetime: the PageSource must outlive the cache. close() stops its loader (requests in
+/// flight finish or are dropped, nothing half-inserted) and writes its trace, throwing when it
+/// cannot; destroying a cache not closed does the same but must swallow that error, so a
+/// caller that reports the trace written calls close() first.
 
 #include <array>
 #include <atomic>
@@ -55,7 +57,9 @@ struct CacheConfig {
   int loader_threads = 2;
   uint32_t upload_pages_per_frame = 0;  ///< pages (of every kind together) uploaded per frame; 0: unlimited
   uint64_t upload_bytes_per_frame = 0;   ///< 0: unlimited
-  std::string trace_path;                ///< record every access to this file (brickyard format)
+  /// Record every access to this file (brickyard format), written by PageCache::close(). The
+  /// cache refuses, when it is made, a path it could not write then (check_writable).
+  std::string trace_path;
   /// The part of the L1 budget that a back end's own brick pool holds beside this cache's L1
   /// (share_l1_budget), 0 where the budget leaves it nothing; unset: not shared, the cache's L1
   /// is the whole budget.
@@ -154,8 +158,11 @@ struct PageRequest {
 class PageCache {
  public:
   /// @throws Error(invalid_argument) for budgets smaller than one page, unknown policies, a
-  /// source without pages.
+  /// source without pages; Error(not_found) or Error(io) for a trace path that cannot be
+  /// written (check_writable).
   PageCache(const PageSource& source, const CacheConfig& config);
+  /// @brief Stops and writes as close() does, if close() was not called; a failure to write
+  /// the trace is lost here.
   ~PageCache();
   PageCache(const PageCache&) = delete;
   PageCache& operator=(const PageCache&) = delete;
@@ -216,6 +223,12 @@ class PageCache {
   /// (uploads deferred by the budget, or for want of an unpinned slot, wait for a later
   /// frame_begin()).
   void wait_idle();
+  /// @brief Ends the cache's use: stops the loader and writes the trace (trace_path), if one
+  /// is recorded. Afterwards the cache loads nothing asynchronously and records nothing
+  /// (wait_idle() returns at once, fetch() still loads); stats() and the destructor remain.
+  /// Must not overlap any other call. A second call does nothing. @throws Error(io) naming the
+  /// trace file, which is then not written (the destructor does not try again).
+  void close();
   CacheStats stats() const;
   CacheStats stats(RecordKind kind) const;
   /// @brief The pages that could not be read so far, each once, in key order, with the error
@@ -244,6 +257,8 @@ class PageCache {
   PageHandle resident_handle(const PageKey& key, uint32_t slot);
   static void set_failed(PageHandle& h, const PageKey& key, std::string error);
   void worker_loop();
+  /// Stops and joins the loader threads (again: nothing).
+  void stop_loader();
   /// Reads and decodes a page from the source, counts it and keeps it in L2. Throws the
   /// read's Error, naming the source.
   PageBuffer load_from_source(PageReader& reader, Kind& kind, const PageKey& key);

@@ -8,6 +8,7 @@
 /// for one access to id:
 ///   hit:  on_hit(id)
 ///   miss: on_miss(id); then evict() until the entry fits; then on_insert(id, size)
+///   a resident id requested at a new size (replay): on_remove(id), then as a miss
 /// evict() returns the victim and forgets it (ghost lists may remember its id). A policy is not
 /// thread-safe: each cache shard owns one and calls it under the shard's lock.
 ///

@@ -40,6 +40,15 @@ ReplayResult replay(const Trace& trace, const std::vector<uint64_t>& next, const
     window_requests = window_misses = 0;
   };
 
+  // An object's size is its latest: a resident copy of another size is stale. It is dropped
+  // (its bytes freed, the policy told) and the access served as a miss at the new size.
+  auto drop_stale = [&](decltype(resident)::iterator it) {
+    policy->on_remove(it->first);
+    used -= it->second.size;
+    if (it->second.prefetched_unused) r.prefetch_wasted_bytes += it->second.size;
+    resident.erase(it);
+  };
+
   // Frees room for `size`; false when the policy cannot evict enough.
   auto make_room = [&](uint64_t size) {
     while (used + size > capacity) {
@@ -80,11 +89,15 @@ ReplayResult replay(const Trace& trace, const std::vector<uint64_t>& next, const
     }
     switch (a.kind) {
       case AccessKind::prefetch_request:
-        if (!resident.contains(a.key)) requested.insert(a.key);
+        if (auto it = resident.find(a.key); it == resident.end() || it->second.size != a.size) requested.insert(a.key);
         continue;
       case AccessKind::prefetch_fill: {
         requested.erase(a.key);
-        if (resident.contains(a.key) || a.size > capacity) continue;
+        if (auto it = resident.find(a.key); it != resident.end()) {
+          if (it->second.size == a.size) continue;
+          drop_stale(it);
+        }
+        if (a.size > capacity) continue;
         policy->on_miss(a.key);
         if (!make_room(a.size)) continue;
         policy->on_insert(a.key, a.size, next_access);
@@ -99,7 +112,8 @@ ReplayResult replay(const Trace& trace, const std::vector<uint64_t>& next, const
     ++r.requests;
     ++window_requests;
     r.bytes_requested += a.size;
-    if (auto it = resident.find(a.key); it != resident.end()) {
+    auto it = resident.find(a.key);
+    if (it != resident.end() && it->second.size == a.size) {
       if (it->second.prefetched_unused) {
         it->second.prefetched_unused = false;
         ++r.prefetches_used;
@@ -111,6 +125,7 @@ ReplayResult replay(const Trace& trace, const std::vector<uint64_t>& next, const
     ++r.misses;
     ++window_misses;
     r.bytes_missed += a.size;
+    if (it != resident.end()) drop_stale(it);  // even when the new size bypasses the cache
     if (requested.erase(a.key)) ++r.late_prefetches;
     if (a.size > capacity) continue;  // would not fit even alone: bypass
     policy->on_miss(a.key);

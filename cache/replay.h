@@ -7,6 +7,14 @@
 /// prefetch fill inserts a brick without counting a request; a demand hit on a prefetched,
 /// not yet used brick makes that prefetch useful. An object larger than the whole cache is a
 /// miss that bypasses it.
+///
+/// Sizes that change (text and oracleGeneral traces may give one object several): an object's
+/// size is its latest, as in libCacheSim. A request at another size than the cached copy's is a
+/// miss; the copy is dropped (its bytes freed, the policy's on_remove()) and the object
+/// inserted again at the new size, so no request is ever served by a copy of another size. A
+/// fill at another size replaces the copy the same way. OPT's future (next_demand_access)
+/// follows the same rule: a copy whose next access is at another size is never used again.
+/// With sizes that vary, OPT (Belady) is a strong heuristic rather than a proven bound.
 
 #include <cstdint>
 #include <string>

@@ -130,15 +130,39 @@ uint32_t Trace::frames() const {
   return records.empty() ? 0 : f + 1;
 }
 
-std::vector<uint64_t> next_demand_access(const Trace& trace, const std::vector<uint64_t>& given_ids) {
-  const std::vector<uint64_t> ids = given_ids.size() == trace.records.size() ? given_ids : object_ids(trace);
+namespace {
+bool is_demand(AccessKind k) { return k == AccessKind::demand || k == AccessKind::blocking; }
+
+/// The next demand access to the same object, whatever its size (oracleGeneral's field).
+std::vector<uint64_t> next_request(const Trace& trace, const std::vector<uint64_t>& ids) {
   std::vector<uint64_t> next(trace.records.size(), kNoNextAccess);
   absl::flat_hash_map<uint64_t, uint64_t> upcoming;
   for (size_t i = trace.records.size(); i-- > 0;) {
-    const TraceRecord& r = trace.records[i];
     auto it = upcoming.find(ids[i]);
     next[i] = it == upcoming.end() ? kNoNextAccess : it->second;
-    if (r.kind == AccessKind::demand || r.kind == AccessKind::blocking) upcoming[ids[i]] = i;
+    if (is_demand(trace.records[i].kind)) upcoming[ids[i]] = i;
+  }
+  return next;
+}
+}  // namespace
+
+std::vector<uint64_t> next_demand_access(const Trace& trace, const std::vector<uint64_t>& given_ids) {
+  const std::vector<uint64_t> ids = given_ids.size() == trace.records.size() ? given_ids : object_ids(trace);
+  std::vector<uint64_t> next(trace.records.size(), kNoNextAccess);
+  // Per object, scanning backwards: the size of its next demand access or fill, and the next
+  // demand access that a copy of that size would serve. A fill of the copy's size leaves the
+  // copy in place; one of another size replaces it, as a demand access of another size does.
+  struct Upcoming {
+    uint32_t size;
+    uint64_t serves;
+  };
+  absl::flat_hash_map<uint64_t, Upcoming> upcoming;
+  for (size_t i = trace.records.size(); i-- > 0;) {
+    const TraceRecord& r = trace.records[i];
+    auto it = upcoming.find(ids[i]);
+    next[i] = it != upcoming.end() && it->second.size == r.size ? it->second.serves : kNoNextAccess;
+    if (is_demand(r.kind)) upcoming[ids[i]] = {r.size, i};
+    else if (r.kind == AccessKind::prefetch_fill) upcoming[ids[i]] = {r.size, next[i]};
   }
   return next;
 }
@@ -274,7 +298,7 @@ void write_trace(const std::string& path, const Trace& trace, TraceFormat format
   // dense id (object_ids) as its id.
   const std::vector<uint64_t> ids = format == TraceFormat::oracle_general ? object_ids(trace) : std::vector<uint64_t>{};
   const std::vector<uint64_t> next =
-      format == TraceFormat::oracle_general ? next_demand_access(trace, ids) : std::vector<uint64_t>{};
+      format == TraceFormat::oracle_general ? next_request(trace, ids) : std::vector<uint64_t>{};
   std::vector<std::byte> buffer;
   buffer.reserve(kRecordBytes * 65536);
   for (size_t i = 0; i < trace.records.size(); ++i) {

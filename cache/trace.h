@@ -13,7 +13,9 @@
 /// - text (`.txt`, `.csv`): one "key size kind" per line (size optional, default 1; kind
 ///   optional, a record kind's name, default brick); '#' starts a comment.
 ///
-/// An object is a (record kind, key) pair: the same key of two kinds is two objects.
+/// An object is a (record kind, key) pair: the same key of two kinds is two objects. Its size
+/// is the size of its latest access (libCacheSim's rule): an access at another size than the
+/// cached copy's replaces that copy (see replay.h).
 
 #include <cstdint>
 #include <string>
@@ -44,7 +46,9 @@ struct TraceRecord {
 
 struct Trace {
   std::vector<TraceRecord> records;
-  /// @brief Number of distinct keys, and the sum of their sizes (the working set).
+  /// @brief Number of distinct objects, and the working set: the sum over objects of each
+  /// one's largest size, the smallest cache that never has to evict (the "N%" sizes of
+  /// cachebench are fractions of it).
   uint64_t unique_objects() const;
   uint64_t unique_bytes() const;
   uint32_t frames() const;  ///< 1 + the largest frame number
@@ -68,11 +72,14 @@ TraceFormat trace_format_of(const std::string& path);
 /// @brief Reads a trace; errors name the file and the record or line at fault.
 Trace read_trace(const std::string& path);
 Trace read_trace(const std::string& path, TraceFormat format);
-/// @brief Writes a trace atomically in the given format (oracleGeneral gets next-access times).
+/// @brief Writes a trace atomically in the given format. oracleGeneral gets each record's next
+/// demand access to the same object, whatever its size (libCacheSim's next access time).
 void write_trace(const std::string& path, const Trace& trace, TraceFormat format);
 
-/// @brief For each record, the index of the next demand access to the same object
-/// (kNoNextAccess = never): the future OPT looks at. `ids` from object_ids(), or empty.
+/// @brief For each record, the index of the next demand access that a copy of its object at
+/// this record's size would serve (kNoNextAccess = never): the next demand access to the
+/// object, unless an access or fill at another size, which replaces the copy, comes first
+/// (then never). The future OPT looks at. `ids` from object_ids(), or empty.
 std::vector<uint64_t> next_demand_access(const Trace& trace, const std::vector<uint64_t>& ids = {});
 
 /// @brief Synthetic traces for sanity checks (size: bytes per object).

@@ -24,6 +24,22 @@ void refuse_to_replace_non_regular(const std::string& path) {
       .with_file(path);
 }
 
+void check_writable(const std::string& path) {
+  namespace fs = std::filesystem;
+  refuse_to_replace_non_regular(path);
+  const fs::path parent = fs::path(path).parent_path();
+  const fs::path dir = parent.empty() ? fs::path(".") : parent;
+  std::error_code ec;
+  const fs::file_status st = fs::status(dir, ec);
+  if (st.type() == fs::file_type::not_found)
+    throw Error(Errc::not_found, fmt::format("its directory {} does not exist", dir.string())).with_file(path);
+  if (!ec && !fs::is_directory(st))
+    throw Error(Errc::io, fmt::format("{} is not a directory", dir.string())).with_file(path);
+  // Other failures (permissions, /proc) show only when a file is created: create the writer's
+  // own partial file, which it removes when it is never committed.
+  AtomicFile probe(path);
+}
+
 AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), partial_(path_ + ".partial") {
   refuse_to_replace_non_regular(path_);
   file_ = std::fopen(partial_.c_str(), "wb");

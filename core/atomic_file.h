@@ -16,6 +16,13 @@ namespace brickyard {
 /// (run as root, `-o /dev/null` replaced the device). @throws Error(io) naming the path.
 void refuse_to_replace_non_regular(const std::string& path);
 
+/// @brief Fails now where an AtomicFile for `path` would fail later: the path is not a regular
+/// file, its directory is missing or is not a directory, or nothing can be created there
+/// (permissions, a read-only or pseudo file system such as /proc). For outputs written only
+/// after long work (a flight's trace, a replay's CSV), so that the work is not done for
+/// nothing. Leaves nothing behind. @throws Error(not_found) or Error(io) naming the path.
+void check_writable(const std::string& path);
+
 class AtomicFile {
  public:
   /// @throws Error(io) naming `path` when PATH.partial cannot be created, or when `path` is

@@ -5,6 +5,7 @@
 /// and its typed brick view. Renderers get theirs from a RenderSession instead.
 ///
 /// The store must outlive it; members are destroyed in reverse order (the view, then the cache).
+/// A caller that reports the cache's trace written calls close() first (see PageCache).
 
 #include "cache/brick_cache.h"
 #include "cache/page_cache.h"
@@ -16,6 +17,9 @@ class GridCache {
  public:
   /// @throws Error(unsupported) for a store without a grid; the cache's errors for its budgets.
   GridCache(const Store& store, const CacheConfig& config) : pages_(store, config), bricks_(pages_, store.dataset().grid()) {}
+
+  /// @brief PageCache::close(): stops the loader and writes the trace. @throws Error(io).
+  void close() { pages_.close(); }
 
   PageCache& pages() { return pages_; }
   BrickCache& bricks() { return bricks_; }

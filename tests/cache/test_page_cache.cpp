@@ -5,6 +5,8 @@
 
 #include <chrono>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <set>
 #include <thread>
 
@@ -301,6 +303,60 @@ TEST(PageCache, ShutdownWithRequestsInFlightIsClean) {
     EXPECT_LE(placed.size(), 32u);
     EXPECT_GE(placed.size(), last.uploads);
   }
+}
+
+TEST(PageCache, ATracePathThatCannotBeWrittenIsRefusedWhenTheCacheIsMade) {
+  FakeSource source;
+  testing::TempDir dir;
+  std::ofstream(dir.file("file")) << "x";
+  CacheConfig c = two_kinds();
+  // A missing directory, a directory that is a file, a path that is a directory: each would
+  // fail only when the trace is written, after all the work.
+  for (const std::string& bad : {dir.file("missing/t.bytrace"), dir.file("file/t.bytrace"), dir.path().string()}) {
+    c.trace_path = bad;
+    try {
+      PageCache cache(source, c);
+      ADD_FAILURE() << "accepted the trace path " << bad;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.file(), bad) << e.what();
+    }
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.file("missing")));
+  // A good path: checked without leaving anything behind, written by close().
+  c.trace_path = dir.file("t.bytrace");
+  PageCache cache(source, c);
+  EXPECT_FALSE(std::filesystem::exists(dir.file("t.bytrace.partial")));
+  EXPECT_FALSE(std::filesystem::exists(dir.file("t.bytrace")));
+  cache.fetch({RecordKind::brick, 3});
+  cache.close();
+  EXPECT_EQ(read_trace(dir.file("t.bytrace")).records.size(), 1u);
+}
+
+TEST(PageCache, CloseThrowsWhenTheTraceCannotBeWritten) {
+  FakeSource source;
+  testing::TempDir dir;
+  const std::string sub = dir.file("gone");
+  std::filesystem::create_directory(sub);
+  CacheConfig c = two_kinds();
+  c.trace_path = sub + "/t.bytrace";
+  PageCache cache(source, c);
+  cache.frame_begin();
+  EXPECT_FALSE(cache.lookup({RecordKind::brick, 1}).resident());
+  cache.frame_end();
+  cache.wait_idle();
+  std::filesystem::remove_all(sub);  // after the check at construction
+  try {
+    cache.close();
+    ADD_FAILURE() << "close() reported no error for a trace it could not write";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::io);
+    EXPECT_EQ(e.file(), c.trace_path) << e.what();
+  }
+  // Reported once: a second close() and the destructor do not try again.
+  EXPECT_NO_THROW(cache.close());
+  cache.wait_idle();  // closed: returns at once
+  EXPECT_EQ(cache.stats(RecordKind::brick).l3.hits, 1u);
+  EXPECT_FALSE(std::filesystem::exists(sub));
 }
 
 TEST(Trace, RecordKindsSurviveEveryFormat) {

@@ -66,6 +66,28 @@ TEST(Trace, OracleGeneralCarriesNextAccessTimes) {
   EXPECT_EQ(next[5], kNoNextAccess);
 }
 
+TEST(Trace, OptsFutureEndsWhereAnObjectChangesSize) {
+  Trace t;
+  t.records = {{1, 0, 4}, {1, 0, 4, AccessKind::prefetch_fill}, {1, 0, 4}, {1, 0, 6, AccessKind::prefetch_fill},
+               {1, 0, 6}, {1, 0, 8}, {1, 0, 6}};
+  const auto next = next_demand_access(t);
+  // A fill of the copy's size leaves it to serve record 2; the fill at size 6 replaces it; the
+  // request at size 8 (record 5) replaces record 4's copy, which record 6, at 6 again, cannot use.
+  const std::vector<uint64_t> expected = {2, 2, kNoNextAccess, 4, kNoNextAccess, kNoNextAccess, kNoNextAccess};
+  EXPECT_EQ(next, expected);
+  EXPECT_EQ(t.unique_bytes(), 8u);  // the object at its largest size
+  // oracleGeneral keeps libCacheSim's meaning: the next request, whatever its size.
+  testing::TempDir dir;
+  write_trace(dir.file("t.oracleGeneral"), t, TraceFormat::oracle_general);
+  const std::string bytes = testing::read_file(dir.file("t.oracleGeneral"));
+  ASSERT_EQ(bytes.size(), 24u * t.records.size());
+  int64_t field = 0;
+  std::memcpy(&field, bytes.data() + 2 * 24 + 16, sizeof field);
+  EXPECT_EQ(field, 4);
+  std::memcpy(&field, bytes.data() + 4 * 24 + 16, sizeof field);
+  EXPECT_EQ(field, 5);
+}
+
 TEST(Trace, TextFormatReadsKeyAndOptionalSize) {
   testing::TempDir dir;
   std::ofstream(dir.file("t.txt")) << "# key size\n12 4096\n0x10 8\n\n12   # size defaults to 1\n";

@@ -4,6 +4,9 @@
 
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "cache/trace.h"
 #include "core/image.h"
@@ -83,6 +86,7 @@ TEST(CliCache, FlightRecordsATraceThatCachebenchReplays) {
                      dir.file("f.bytrace") + " --stats " + dir.file("stats.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(contains(r.output, "12 frames at 160x120")) << r.output;
+  EXPECT_TRUE(contains(r.output, "wrote " + dir.file("f.bytrace"))) << r.output;
   EXPECT_TRUE(contains(testing::read_file(dir.file("stats.json")), "\"l2_peak_bytes\"")) << r.output;
   const Trace t = read_trace(dir.file("f.bytrace"));
   EXPECT_EQ(t.frames(), 13u);  // frames 1..12 (frame 0 is before the first frame_begin)
@@ -92,6 +96,70 @@ TEST(CliCache, FlightRecordsATraceThatCachebenchReplays) {
   r = brickyard("flight " + dir.file("s") + " --path " + dir.file("nothing.json"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.output, "nothing.json: cannot open")) << r.output;
+}
+
+/// A grid store and a two-frame path for flights that are meant to fail before they fly.
+struct SmallFlight {
+  testing::TempDir dir;
+  SmallFlight() {
+    EXPECT_EQ(brickyard("-q import field:fbm --size 32 --type u8 --brick-size 16 --out " + dir.file("s")).exit_code, 0);
+    std::ofstream(dir.file("path.json")) << R"({ "frames": 2, "image": {"width": 64, "height": 48},
+      "camera_path": { "keyframes": [ {"eye": [0.5, -1.5, 0.5], "target": [0.5, 0.5, 0.5]},
+                                      {"eye": [0.5, 0.2, 0.5], "target": [0.5, 0.9, 0.5]} ] } })";
+  }
+  testing::CommandResult fly(const std::string& args) const {
+    return brickyard("flight " + dir.file("s") + " --path " + dir.file("path.json") + " --l1 1MiB --l2 2MiB " + args);
+  }
+};
+
+TEST(CliCache, FlightRefusesATraceOrStatsItCannotWriteBeforeFlying) {
+  const SmallFlight f;
+  std::ofstream(f.dir.file("file")) << "x";
+  std::vector<std::pair<std::string, std::string>> cases = {
+      {"--trace " + f.dir.file("missing_dir/fl.bytrace"), f.dir.file("missing_dir/fl.bytrace")},
+      {"--trace " + f.dir.file("file/fl.bytrace"), f.dir.file("file/fl.bytrace")},
+      {"--trace " + f.dir.path().string(), f.dir.path().string()},
+      {"--stats " + f.dir.file("missing_dir/s.json"), f.dir.file("missing_dir/s.json")},
+  };
+  if (std::filesystem::is_directory("/proc")) cases.push_back({"--trace /proc/fl.bytrace", "/proc/fl.bytrace"});
+  for (const auto& [args, path] : cases) {
+    const auto r = f.fly(args);
+    EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
+    EXPECT_TRUE(contains(r.output, path + ":")) << args << "\n" << r.output;
+    EXPECT_FALSE(contains(r.output, "wrote")) << args << "\n" << r.output;
+    EXPECT_FALSE(contains(r.output, "flight over")) << "flew before refusing: " << args << "\n" << r.output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(f.dir.file("missing_dir")));
+  EXPECT_FALSE(std::filesystem::exists("/proc/fl.bytrace"));
+}
+
+TEST(CliCache, FlightRefusesALodOrFrameCountThatMeansNothing) {
+  const SmallFlight f;
+  for (const std::string args : {"--lod 0", "--lod -1", "--lod nan", "--frames 0", "--frames -1"}) {
+    const auto r = f.fly(args + " --trace " + f.dir.file("t.bytrace"));
+    const std::string option = args.substr(0, args.find(' '));
+    EXPECT_EQ(r.exit_code, 2) << args << "\n" << r.output;
+    EXPECT_TRUE(contains(r.output, "'" + option + "'")) << args << "\n" << r.output;
+    EXPECT_FALSE(contains(r.output, "wrote")) << args << "\n" << r.output;
+    EXPECT_FALSE(contains(r.output, "flight over")) << args << "\n" << r.output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(f.dir.file("t.bytrace")));
+  // Given and valid, or left out, --frames still flies.
+  const auto r = f.fly("--frames 1 --lod 2");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "1 frames at 64x48")) << r.output;
+}
+
+TEST(CliCache, CachebenchRefusesAnOutputItCannotWriteBeforeReplaying) {
+  testing::TempDir dir;
+  for (const std::string option : {"--csv", "--plot", "--convert"}) {
+    const std::string path = dir.file("missing_dir/out");
+    const auto r = brickyard("cachebench --synthetic loop:objects=100,passes=2 --policies lru " + option + " " + path);
+    EXPECT_EQ(r.exit_code, 1) << option << "\n" << r.output;
+    EXPECT_TRUE(contains(r.output, path)) << option << "\n" << r.output;
+    EXPECT_FALSE(contains(r.output, "wrote")) << option << "\n" << r.output;
+    EXPECT_FALSE(contains(r.output, "miss ratio")) << "replayed before refusing: " << option << "\n" << r.output;
+  }
 }
 
 TEST(CliCache, CachebenchReplaysTracesOfSeveralRecordKindsOrOneOfThem) {
