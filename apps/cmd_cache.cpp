@@ -11,6 +11,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <tbb/task_arena.h>
 
 #include "apps/commands.h"
 #include "apps/parse.h"
@@ -24,6 +25,7 @@
 #include "core/parallel.h"
 #include "core/plot.h"
 #include "core/raw_volume.h"
+#include "core/resources.h"
 #include "core/units.h"
 #include "session/grid_cache.h"
 #include "storage/store.h"
@@ -44,9 +46,30 @@ struct CachebenchOptions {
 };
 
 
+/// What replaying a synthetic trace holds in memory, from its parameters, before it is made: its
+/// records with their next-access times and object ids, the generator's tables (Zipf: a CDF and
+/// a permutation over the objects), the next-access index over the objects, and a resident set
+/// per replay running at once (up to `replays`, one per thread).
+ResourceNeeds synthetic_trace_needs(const std::string& spec, const std::string& kind, std::map<std::string, double>& p,
+                                    double replays) {
+  const bool zipf = kind == "zipf";
+  const double records = zipf ? p["requests"] : p["objects"] * p["passes"];
+  const double objects = kind == "scan" ? records : zipf ? std::min(p["objects"], records) : p["objects"];
+  const double tables = zipf ? 16 * p["objects"] : 0;
+  constexpr double kPerObject = 64;  // a hash map's slot with its load factor, in the index and in each replay
+  ResourceNeeds needs;
+  needs.task = fmt::format("cachebench --synthetic {}", spec);
+  needs.memory.bytes =
+      saturating_bytes(records * (sizeof(TraceRecord) + 16) + tables + objects * kPerObject * (1 + replays));
+  needs.memory.why = fmt::format("{} records and {} objects", format_count(records), format_count(objects));
+  needs.memory.lower = "fewer requests, objects or passes in --synthetic lower it, as do fewer --threads";
+  return needs;
+}
+
 /// "zipf:objects=10000,requests=1000000,alpha=0.9,seed=1", "scan:objects=N,passes=P",
-/// "loop:objects=N,passes=P" (each may add size=BYTES).
-Trace synthetic_trace(const std::string& spec) {
+/// "loop:objects=N,passes=P" (each may add size=BYTES). Refused before it is generated when the
+/// replays would not fit in memory (`replays`: how many run at once).
+Trace synthetic_trace(const std::string& spec, double replays) {
   const size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   std::map<std::string, double> p = {{"objects", 10000}, {"requests", 1000000}, {"alpha", 0.9},
@@ -61,6 +84,9 @@ Trace synthetic_trace(const std::string& spec) {
     }
   if (p["objects"] < 1 || p["size"] < 1 || p["size"] > 4e9)
     throw Error(Errc::invalid_argument, "objects and size must be positive").with_field("--synthetic");
+  if (p["requests"] < 0 || p["passes"] < 0)
+    throw Error(Errc::invalid_argument, "requests and passes must be at least 0").with_field("--synthetic");
+  if (kind == "zipf" || kind == "scan" || kind == "loop") check_resources(synthetic_trace_needs(spec, kind, p, replays));
   const uint32_t size = uint32_t(p["size"]);
   if (kind == "zipf") return zipf_trace(uint64_t(p["objects"]), uint64_t(p["requests"]), p["alpha"], uint64_t(p["seed"]), size);
   if (kind == "scan") return scan_trace(uint64_t(p["objects"]), uint64_t(p["passes"]), size);
@@ -118,7 +144,11 @@ void run_cachebench(const CachebenchOptions& o) {
   for (const std::string* path : {&o.convert, &o.csv, &o.plot})
     if (!path->empty()) check_writable(*path);
   if (!o.plot.empty() && o.csv.empty() && o.convert.empty()) check_writable(o.plot + ".csv");
-  Trace trace = !o.synthetic.empty() ? synthetic_trace(o.synthetic)
+  const double replays = o.convert.empty() ? std::min<double>(tbb::this_task_arena::max_concurrency(),
+                                                               double(split_list(o.policies, ',').size() *
+                                                                      split_list(o.sizes, ',').size()))
+                                           : 0;
+  Trace trace = !o.synthetic.empty() ? synthetic_trace(o.synthetic, replays)
                 : o.format.empty()   ? read_trace(o.trace)
                                      : read_trace(o.trace, parse_trace_format(o.format));
   if (!o.kind.empty()) trace = trace.of_kind(record_kind_from_string(o.kind, "--kind"));

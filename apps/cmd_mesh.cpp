@@ -92,7 +92,7 @@ void print_mesh_info(const std::string& path, const Store& store) {
   const Manifest& m = store.manifest();
   const MeshSummary& mesh = m.mesh;
   std::cout << fmt::format("store {}: {}, tetrahedral mesh, format version {}\n", path,
-                           m.complete ? "complete" : "INCOMPLETE (build interrupted)", m.format_version);
+                           m.complete ? "complete" : "INCOMPLETE (" + incomplete_reason(path) + ")", m.format_version);
   std::cout << fmt::format("{} tetrahedra, {} vertices in {} clusters, pages of {}, {} time step{}{}\n", mesh.tets,
                            mesh.vertices, mesh.clusters, format_bytes(double(mesh.page_bytes)), m.time_steps,
                            m.time_steps == 1 ? "" : "s", mesh.moving ? " (moving vertices)" : "");

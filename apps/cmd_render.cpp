@@ -14,6 +14,7 @@
 #include "apps/parse.h"
 #include "core/error.h"
 #include "core/raw_volume.h"
+#include "core/resources.h"
 #include "core/timing.h"
 #include "core/units.h"
 #include "report/bench_report.h"
@@ -92,6 +93,31 @@ void print_backends() {
   }
 }
 
+/// Bytes a frame holds per pixel: colour (16), depth (4), normals (12), and the 8-bit copy a
+/// PNG is written from (4).
+constexpr double kFrameBytesPerPixel = 36;
+
+uint32_t pixel_state_bytes(const std::string& backend) {
+  try {
+    return backends().find(backend).info.pixel_state_bytes;
+  } catch (const Error&) {
+    return 0;  // an unknown name: the session refuses it, naming the scene's key
+  }
+}
+
+/// The memory frames will hold, refused before the store is opened: `frame_pixels` pixels of
+/// frame buffers, `state_bytes` of the back ends' per-pixel state, and the L1 pools (allocated
+/// when a cache opens; L2 fills only with what the frames read, so its budget is not counted).
+void check_frame_memory(const std::string& task, double frame_pixels, double state_bytes, double l1_bytes,
+                        const std::string& lower) {
+  ResourceNeeds needs;
+  needs.task = task;
+  needs.memory.bytes = saturating_bytes(frame_pixels * kFrameBytesPerPixel + state_bytes + l1_bytes);
+  needs.memory.why = "frame buffers, the back end's per-pixel state and the L1 pool";
+  needs.memory.lower = lower;
+  check_resources(needs);
+}
+
 int run_render(const RenderOptions& o) {
   if (o.list) {
     print_backends();
@@ -101,6 +127,14 @@ int run_render(const RenderOptions& o) {
   if (o.out.empty()) throw Error(Errc::invalid_argument, "an output PNG is required").with_field("-o");
   Scene scene = load_scene(o.scene);
   if (!o.dataset.empty()) scene.dataset = o.dataset;
+  {
+    const double pixels = double(scene.width) * double(scene.height);
+    const double sessions = o.error_maps.empty() ? 1 : 2;  // --error-maps renders the reference beside
+    const uint32_t state = pixel_state_bytes(o.backend.empty() ? scene.backend : o.backend);
+    check_frame_memory(fmt::format("render of {}x{} pixels", scene.width, scene.height), pixels * sessions,
+                       pixels * state, double(scene.cache.l1_bytes) * sessions,
+                       "a smaller image (the scene's image.width and image.height) or cache.l1 lowers it");
+  }
   RenderSession::Options opts;
   opts.backend = o.backend;
   opts.params = parse_sets(o.sets, "--set");
@@ -314,6 +348,16 @@ void run_bench(const BenchOptions& o) {
           .with_field("--quality");
   }
 
+  {
+    // The supersampled truth and its resolved copy, then each back end's frame beside the truth.
+    const double pixels = double(scene.width) * double(scene.height);
+    uint32_t state = 0;
+    for (const std::string& n : names) state = std::max(state, pixel_state_bytes(n));
+    check_frame_memory(fmt::format("bench at {}x{} pixels", scene.width, scene.height),
+                       pixels * double(supersample) * double(supersample) + 2 * pixels, pixels * state,
+                       double(scene.cache.l1_bytes),
+                       "a smaller --size or --reference-supersample, or the scene's cache.l1, lowers it");
+  }
   fs::create_directories(fs::path(o.out) / "images");
   FrameOutputs outputs;
   outputs.depth = true;

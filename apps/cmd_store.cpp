@@ -26,8 +26,16 @@
 #include "preprocess/export.h"
 #include "preprocess/volume_source.h"
 #include "storage/store.h"
+#include "storage/store_lock.h"
 
 namespace brickyard::cli {
+
+std::string incomplete_reason(const std::string& path) {
+  const auto pid = store_writer_pid(path);
+  if (!pid) return "build interrupted";
+  return *pid > 0 ? fmt::format("being built by process {}", *pid) : std::string("being built by another process");
+}
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -49,7 +57,7 @@ struct ImportOptions {
   int brick_size = 32, apron = 1, hc_level = 9;
   std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size, transaction_size;
   double constant_tolerance = 0;
-  bool no_shuffle = false, no_map_growth = false, force = false, octree = false;
+  bool no_shuffle = false, no_map_growth = false, force = false, octree = false, no_disk_check = false;
   // meshes
   MeshImportOptions mesh;
 };
@@ -144,6 +152,7 @@ void run_import(const ImportOptions& o) {
   if (!o.transaction_size.empty()) b.batch_bytes = parse_bytes(o.transaction_size, "--transaction-size");
   b.map_growth = !o.no_map_growth;
   b.force = o.force;
+  b.check_disk = !o.no_disk_check;
 
   const Vec3s d = source->dims();
   std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
@@ -193,8 +202,8 @@ void run_info(const std::string& path, bool json) {
   if (store.kind() == DataKind::tetrahedral) return print_mesh_info(path, store);
   const GridLayout& l = store.layout();
   const BrickFormat& f = m.format;
-  std::cout << fmt::format("store {}: {}, format version {}\n", path, m.complete ? "complete" : "INCOMPLETE (build interrupted)",
-                           m.format_version);
+  std::cout << fmt::format("store {}: {}, format version {}\n", path,
+                           m.complete ? "complete" : "INCOMPLETE (" + incomplete_reason(path) + ")", m.format_version);
   std::cout << fmt::format("volume {}x{}x{} {}, spacing ({:g}, {:g}, {:g}), origin ({:g}, {:g}, {:g})\n", m.dims.x, m.dims.y,
                            m.dims.z, to_string(f.type), m.spacing.x, m.spacing.y, m.spacing.z, m.origin.x, m.origin.y,
                            m.origin.z);
@@ -276,7 +285,7 @@ size_t verify_octree(const std::string& path, const Store& store) {
 int run_verify(const std::string& path) {
   Store store(path, {.allow_incomplete = true});
   if (!store.manifest().complete) {
-    std::cout << fmt::format("{}: INCOMPLETE: the build was interrupted; nothing else checked\n", path);
+    std::cout << fmt::format("{}: INCOMPLETE ({}); nothing else checked\n", path, incomplete_reason(path));
     return 1;
   }
   if (store.kind() == DataKind::tetrahedral) return verify_mesh(path, store);
@@ -453,7 +462,13 @@ void add_store_commands(CLI::App& app, int& exit_status) {
         ->group(build);
     cmd->add_flag("--octree", o->octree, "Also build the octree volume (lossless; see build-octree for its options)")
         ->group(build);
-    cmd->add_flag("--force", o->force, "Rebuild a complete store made from another source or with other parameters")
+    cmd->add_flag("--force", o->force,
+                  "Rebuild a complete store made from another source or with other parameters (built beside it and "
+                  "swapped in when complete: until then the old store stays)")
+        ->group(build);
+    cmd->add_flag("--no-disk-check", o->no_disk_check,
+                  "Start even when the free disk is below the store's worst case (every brick incompressible); for "
+                  "data that compresses well")
         ->group(build);
     cmd->callback([o] { run_import(*o); });
   }

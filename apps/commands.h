@@ -49,6 +49,9 @@ struct MeshImportOptions {
 /// @brief Whether `import` reads this source as a mesh (mesh:FIELD, or a mesh file's extension).
 bool is_mesh_source(const std::string& source);
 void run_mesh_import(const MeshImportOptions& options);
+/// @brief Why a store is incomplete, for info and verify: "being built by process N" while a
+/// writer holds it, else "build interrupted".
+std::string incomplete_reason(const std::string& path);
 /// @brief info, verify and export of a tetrahedral store.
 void print_mesh_info(const std::string& path, const Store& store);
 int verify_mesh(const std::string& path, const Store& store);
@@ -59,9 +62,6 @@ void add_cache_commands(CLI::App& app, int& exit_status);
 /// @brief render, bench. render sets exit_status (kExitDamaged, see report_unreadable).
 void add_render_commands(CLI::App& app, int& exit_status);
 
-/// @brief Exit status of a run that drew around records it could not read (corrupt or missing
-/// in the store), unless --allow-damaged.
-inline constexpr int kExitDamaged = 3;
 /// @brief Says on stderr how many records a run could not read and why (each error names its
 /// store and key; the first few in full), and that the image drew them from a coarser level or
 /// left them empty. Returns kExitDamaged, or 0 when there were none or `allow_damaged`.

@@ -3,7 +3,10 @@
 
 #include <exception>
 #include <iostream>
+#include <map>
 #include <memory>
+#include <new>
+#include <string>
 
 #include <tbb/global_control.h>
 
@@ -11,6 +14,25 @@
 #include "core/error.h"
 #include "core/progress.h"
 #include "session/modules.h"
+
+namespace {
+
+/// What lowers a command's memory, for an allocation that failed: most commands check what
+/// they need before they start (core/resources.h), so this is what their estimates missed.
+std::string memory_options(const std::string& command) {
+  static const std::map<std::string, std::string> options = {
+      {"import", "a smaller --size or --brick-size; for meshes, fewer --cells or --replicate, or a smaller file"},
+      {"generate", "a smaller --size"},
+      {"render", "a smaller image (the scene's image.width and image.height) or cache budgets (cache.l1, cache.l2)"},
+      {"bench", "a smaller --size or --reference-supersample, or the scene's cache budgets (cache.l1, cache.l2)"},
+      {"flight", "smaller --l1 and --l2"},
+      {"cachebench", "a smaller trace (fewer requests or objects in --synthetic) or fewer --sizes"},
+  };
+  const auto it = options.find(command);
+  return (it == options.end() ? std::string() : it->second + ", or ") + "fewer threads (-j N before the subcommand)";
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace brickyard;
@@ -62,6 +84,12 @@ int main(int argc, char** argv) {
   } catch (const Error& e) {
     std::cerr << "brickyard: error: " << e.what() << '\n';
     return exit_code(e.code());
+  } catch (const std::bad_alloc&) {
+    const auto parsed = app.get_subcommands();
+    const std::string command = parsed.empty() ? std::string() : parsed.front()->get_name();
+    std::cerr << "brickyard: error: " << (command.empty() ? "brickyard" : command)
+              << " ran out of memory (an allocation failed); " << memory_options(command) << " lowers what it needs\n";
+    return kExitOutOfResources;
   } catch (const std::exception& e) {
     std::cerr << "brickyard: error: " << e.what() << '\n';
     return 1;

@@ -29,7 +29,10 @@ void Error::compose() {
                       field_.empty() ? "" : "field '" + field_ + "': ", message_);
 }
 
-int exit_code(Errc code) { return code == Errc::invalid_argument ? 2 : 1; }
+int exit_code(Errc code) {
+  if (code == Errc::invalid_argument) return 2;
+  return code == Errc::resource ? kExitOutOfResources : 1;
+}
 
 namespace detail {
 void check_failed(const char* file, int line, const std::string& what) {

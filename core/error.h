@@ -52,8 +52,15 @@ class Error : public std::exception {
   std::string message_, file_, key_, field_, full_;
 };
 
-/// @brief Process exit code for an error kind: 2 for usage errors, 1 otherwise (0 is success).
+/// @brief Process exit code for an error kind: 2 for usage errors, 4 when memory or disk ran
+/// out or would (kExitOutOfResources), 1 otherwise (0 is success).
 int exit_code(Errc code);
+/// @brief The exit code of a render or flight that drew around records it could not read
+/// (corrupt or missing in the store), unless --allow-damaged.
+inline constexpr int kExitDamaged = 3;
+/// @brief The exit code of Errc::resource, and of an allocation that failed (std::bad_alloc):
+/// the same input may succeed with lower settings or on a larger machine.
+inline constexpr int kExitOutOfResources = 4;
 
 namespace detail {
 [[noreturn]] void check_failed(const char* file, int line, const std::string& what);

@@ -1,12 +1,18 @@
 #include "preprocess/builder.h"
 
+#include <fcntl.h>  // AT_FDCWD, for renameat2
+#include <sys/stat.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <atomic>
 #include <cfloat>
 #include <cmath>
 #include <condition_variable>
+#include <cstdio>
 #include <cstring>
 #include <deque>
+#include <filesystem>
 #include <limits>
 #include <mutex>
 #include <thread>
@@ -15,6 +21,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/task_arena.h>
 
 #include "core/error.h"
 #include "core/parallel.h"
@@ -467,8 +474,50 @@ void validate(const BuildOptions& o) {
 
 }  // namespace
 
-bool prepare_store_directory(const std::string& dir, const std::string& source_json, const std::string& build_json,
-                             bool force, BuildResult& result) {
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void fail_io(const std::string& what, const std::error_code& ec, const std::string& dir) {
+  throw Error(Errc::io, fmt::format("{}: {}", what, ec.message())).with_file(dir);
+}
+
+// A sibling a rebuild left behind is removed only when it holds a store (or nothing): a user's
+// directory of that name is not ours to delete.
+void remove_leftover(const std::string& path, const std::string& dir) {
+  std::error_code ec;
+  if (!fs::exists(fs::symlink_status(path, ec))) return;
+  if (probe_store(path) == StoreState::not_a_store)
+    throw Error(Errc::invalid_argument,
+                fmt::format("{} is in the way of rebuilding this store and is not a brickyard store; move it away", path))
+        .with_file(dir);
+  fs::remove_all(path, ec);
+  if (ec) fail_io(fmt::format("cannot remove {}", path), ec, dir);
+}
+
+bool same_file_system(const std::string& a, const std::string& b) {
+  struct stat sa {}, sb {};
+  return ::stat(a.c_str(), &sa) == 0 && ::stat(b.c_str(), &sb) == 0 && sa.st_dev == sb.st_dev;
+}
+
+/// Swaps two directories in one step; false where the file system cannot (the caller renames twice).
+bool exchange_directories(const std::string& a, const std::string& b, const std::string& dir) {
+#ifdef RENAME_EXCHANGE
+  if (::renameat2(AT_FDCWD, a.c_str(), AT_FDCWD, b.c_str(), RENAME_EXCHANGE) == 0) return true;
+  if (errno != EINVAL && errno != ENOSYS && errno != ENOTSUP)
+    throw Error(Errc::io, fmt::format("cannot swap {} into place: {}", a, std::strerror(errno))).with_file(dir);
+#endif
+  (void)a, (void)b, (void)dir;
+  return false;
+}
+
+}  // namespace
+
+StoreBuildTarget::StoreBuildTarget(const std::string& dir, const std::string& source_json, const std::string& build_json,
+                                   bool force, BuildResult& result)
+    : lock_(dir), dir_(dir), real_(resolved_store_path(dir)), path_(dir), rebuilding_(store_sibling(dir, "rebuilding")),
+      replaced_(store_sibling(dir, "replaced")) {
+  reclaim();
   switch (probe_store(dir)) {
     case StoreState::absent: break;
     case StoreState::not_a_store:
@@ -488,19 +537,105 @@ bool prepare_store_directory(const std::string& dir, const std::string& source_j
       };
       if (identity(old.source) == identity(source_json) && old.build == build_json && !force) {
         result.manifest = old;
-        result.up_to_date = true;
-        return true;
+        up_to_date_ = true;
+        return;
       }
       if (!force)
         throw Error(Errc::invalid_argument,
                     "a complete store from a different source or with different parameters is there; "
                     "pass --force to rebuild it")
             .with_file(dir);
-      remove_store_files(dir);
+      if (!same_file_system(real_, fs::path(real_).parent_path().string())) {
+        remove_store_files(dir);  // a store that is a mount point of its own: no rename can cross
+        break;
+      }
+      beside_ = true;
+      path_ = rebuilding_;
       break;
     }
   }
-  return false;
+}
+
+StoreBuildTarget::~StoreBuildTarget() {
+  if (!beside_ || committed_) return;
+  std::error_code ec;
+  fs::remove_all(rebuilding_, ec);  // else the next writer reclaims it
+}
+
+void StoreBuildTarget::reclaim() {
+  std::error_code ec;
+  if (fs::exists(fs::symlink_status(replaced_, ec))) {
+    if (fs::exists(fs::symlink_status(real_, ec))) {
+      remove_leftover(replaced_, dir_);
+    } else {
+      const bool rebuilt = probe_store(rebuilding_) == StoreState::complete;
+      fs::rename(rebuilt ? rebuilding_ : replaced_, real_, ec);
+      if (ec) fail_io(fmt::format("cannot put {} back in place", rebuilt ? rebuilding_ : replaced_), ec, dir_);
+      if (rebuilt) remove_leftover(replaced_, dir_);
+    }
+  }
+  remove_leftover(rebuilding_, dir_);
+}
+
+void StoreBuildTarget::commit() {
+  if (!beside_ || committed_) return;
+  std::string old = rebuilding_;  // where the old store is once the new one is in place
+  if (!exchange_directories(rebuilding_, real_, dir_)) {
+    std::error_code ec;
+    fs::rename(real_, replaced_, ec);
+    if (ec) fail_io(fmt::format("cannot move the old store aside to {}", replaced_), ec, dir_);
+    fs::rename(rebuilding_, real_, ec);
+    if (ec) {
+      std::error_code back;
+      fs::rename(replaced_, real_, back);
+      fail_io(fmt::format("cannot move {} into place", rebuilding_), ec, dir_);
+    }
+    old = replaced_;
+  }
+  committed_ = true;
+  std::error_code ec;
+  fs::remove_all(old, ec);  // the new store is in place; a failure here is reclaimed next time
+}
+
+ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const BuildOptions& o, int threads) {
+  const GridLayout layout = GridLayout::make(dims, o.brick_size);
+  const double T = double(size_of(type)), M = o.brick_size, A = o.apron;
+  const double ring_slices = M + A + std::max(A, 1.0), E = M + 2 * A, G = ring_slices;
+  const double payload = E * E * E * T;
+  const double record = double(sizeof(BrickHeader)) + payload + std::floor(payload / 255) + 16;  // LZ4_COMPRESSBOUND
+  constexpr double kPage = 4096, kPageHeader = 16;
+  const double record_on_disk = std::ceil((record + kPageHeader) / kPage) * kPage;
+
+  double rings = 0, bricks = 0;
+  for (int l = 0; l < layout.levels; ++l) {
+    const Vec3s d = layout.level_dims(l), b = layout.level_bricks(l);
+    rings += ring_slices * double(d.x) * double(d.y) * T;
+    bricks += double(b.x) * double(b.y) * double(b.z);
+  }
+  const Vec3s fb = layout.level_bricks(layout.finest());
+  const double row = double(fb.x) * double(fb.y) * record;
+  const double nodes = bricks * double(sizeof(NodeRecord));
+  const double stored = bricks * record_on_disk;
+  const double queues = std::min(double(uint64_t(64) << 20) + double(o.batch_bytes), stored);
+  const double histogram = (type == ValueType::u16 ? 65536.0 : 256.0) * 8;
+  const double per_thread = G * G * G * T + 2 * payload + histogram;
+  const double build = rings + row + nodes + queues + std::max(1, threads) * per_thread;
+  const double slice = double(dims.x) * double(dims.y) * 4;
+  const double scan = type == ValueType::f32 ? std::max(slice, std::min(double(32 << 20), slice * double(dims.z))) : 0;
+
+  ResourceNeeds needs;
+  needs.task = fmt::format("import of {}x{}x{} {}", dims.x, dims.y, dims.z, to_string(type));
+  needs.memory.bytes = saturating_bytes(std::max(build, scan));
+  needs.memory.why = fmt::format("{:g} slices of each of its {} levels and a row of {}x{} compressed bricks", ring_slices,
+                                 layout.levels, fb.x, fb.y);
+  // Smaller bricks mean fewer slices and a thinner row but more nodes: say which way helps.
+  needs.memory.lower = fmt::format("a smaller grid (--size for field: sources) or a {} --brick-size lowers it",
+                                   rings + row > nodes ? "smaller" : "larger");
+  needs.disk.bytes = saturating_bytes((stored + nodes) * 9 / 8);
+  needs.disk.why = "every brick at LZ4's worst case, on whole LMDB pages";
+  needs.disk.lower = "a smaller grid (--size for field: sources) lowers it, and --no-disk-check starts anyway for data "
+                     "that compresses well";
+  return needs;
 }
 
 BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options, Progress* progress) {
@@ -511,7 +646,15 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   const std::string source_json = source.describe_json();
   const std::string build_json = build_params_json(options, source.background());
 
-  if (prepare_store_directory(dir, source_json, build_json, options.force, result)) return result;
+  StoreBuildTarget target(dir, source_json, build_json, options.force, result);
+  if (target.up_to_date()) {
+    result.up_to_date = true;
+    return result;
+  }
+  ResourceNeeds needs = estimate_build_needs(source.dims(), source.type(), options, tbb::this_task_arena::max_concurrency());
+  if (!options.check_disk) needs.disk.bytes = 0;
+  needs.disk_path = dir;  // a rebuild beside it is on the same file system
+  check_resources(needs);
 
   BrickFormat format;
   format.type = source.type();
@@ -570,9 +713,9 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   env.growth = options.map_growth;
   env.max_map_size = options.map_growth ? uint64_t(1) << 44 : env.map_size;
   env.no_sync = true;  // the final transaction syncs everything before it
-  StoreWriter store(dir, manifest, env, options.batch_bytes);
+  auto store = std::make_unique<StoreWriter>(target.path(), manifest, env, options.batch_bytes);
   {
-    RecordWriter writer(store, size_t(64) << 20);
+    RecordWriter writer(*store, size_t(64) << 20);
     ctx.writer = &writer;
     dispatch_value_type(format.type, [&](auto tag) { run_levels<decltype(tag)>(source, ctx, options, scan, progress); });
     writer.close();
@@ -611,7 +754,9 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
     result.stored_bytes += s.stored_bytes.load();
   }
   result.warnings = value_range_warnings(manifest.min_value, manifest.max_value);
-  store.finish(manifest, ctx.nodes);
+  store->finish(manifest, ctx.nodes);
+  store.reset();  // closed before its directory is swapped into place
+  target.commit();
   manifest.complete = true;
   result.manifest = manifest;
   result.seconds = watch.seconds();

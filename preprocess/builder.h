@@ -16,9 +16,11 @@
 #include <vector>
 #include <utility>
 
+#include "core/resources.h"
 #include "storage/brick_codec.h"
 #include "storage/lmdb_env.h"
 #include "storage/manifest.h"
+#include "storage/store_lock.h"
 
 namespace brickyard {
 
@@ -51,6 +53,9 @@ struct BuildOptions {
   /// Rebuild a complete store whose source or parameters differ (an incomplete one is always
   /// rebuilt; a complete, identical one is left alone).
   bool force = false;
+  /// Refuse to start when the free disk is below the store's worst case (estimate_build_needs);
+  /// off for data known to compress well. Memory is always checked.
+  bool check_disk = true;
 };
 
 struct BuildResult {
@@ -69,16 +74,71 @@ struct BuildResult {
 /// value but zero denormal (below the smallest normal float, where precision runs out).
 std::vector<std::string> value_range_warnings(double min_value, double max_value);
 
-/// @brief Decides what to do with whatever is at `dir` before a build: nothing there goes
-/// ahead; an incomplete store is removed (result.rebuilt_incomplete); a complete one from the
-/// same source and parameters is left alone (returns true: up to date, result.manifest is
-/// its manifest) unless `force`, in which case, as for a different one, it is removed; a
-/// different complete store without `force` and anything that is not a store are refused.
-bool prepare_store_directory(const std::string& dir, const std::string& source_json, const std::string& build_json,
-                             bool force, BuildResult& result);
+/// @brief Where a build writes, and how what it wrote takes the store's place; every builder of
+/// a store (grids, meshes) goes through one.
+///
+/// The constructor takes the store's write lock (storage/store_lock.h), held until the
+/// destructor, so a second writer is refused before it looks at the store and never takes a
+/// live build for an interrupted one. It reclaims what a killed rebuild left beside the store
+/// (below), then decides by what is at `dir`:
+/// - nothing (or an empty directory): built in place;
+/// - an incomplete store, which with the lock held is an interrupted build: removed
+///   (result.rebuilt_incomplete), built in place;
+/// - a complete store from the same source and parameters: left alone (up_to_date(),
+///   result.manifest is its manifest) unless `force`;
+/// - another complete store: refused without `force`; with it, rebuilt beside: path() is
+///   `.NAME.rebuilding` next to NAME, and commit() swaps it into NAME's place (one atomic
+///   renameat2 exchange where the file system has it, else NAME renamed to `.NAME.replaced` and
+///   the rebuild renamed to NAME) and removes the old store. Until then the old store stays
+///   complete and readable; a build that fails leaves it as it was, and the destructor removes
+///   the unfinished rebuild. (A store that is a mount point of its own cannot be swapped, no
+///   rename crossing file systems: it is removed and rebuilt in place.)
+/// - anything that is not a store: refused, never overwritten.
+///
+/// After a kill, the next writer reclaims the siblings: a rebuild is removed; an old store set
+/// aside is removed when NAME is there, and when NAME is missing (a kill between the fallback's
+/// two renames) the complete rebuild goes into place, or else the old store goes back.
+class StoreBuildTarget {
+ public:
+  StoreBuildTarget(const std::string& dir, const std::string& source_json, const std::string& build_json, bool force,
+                   BuildResult& result);
+  /// @brief Removes a rebuild that commit() did not put in place; releases the lock.
+  ~StoreBuildTarget();
+  StoreBuildTarget(const StoreBuildTarget&) = delete;
+  StoreBuildTarget& operator=(const StoreBuildTarget&) = delete;
 
-/// @brief Builds (or rebuilds) the store in `dir` from `source`.
-/// @throws Error naming the source or the store; a failed build leaves an incomplete store.
+  bool up_to_date() const { return up_to_date_; }
+  /// @brief The directory to build in: `dir`, or the rebuild beside it.
+  const std::string& path() const { return path_; }
+  /// @brief Puts the finished store in place; its StoreWriter must be closed. Nothing to do for
+  /// a store built in place. @throws Error(io) when a rename fails (the old store is then back).
+  void commit();
+
+ private:
+  void reclaim();
+
+  StoreWriteLock lock_;
+  std::string dir_, real_, path_, rebuilding_, replaced_;
+  bool up_to_date_ = false, beside_ = false, committed_ = false;
+};
+
+/// @brief What build_store needs for a grid of `dims` `type` values with `options`, on
+/// `threads` threads; pure, so that tests give it numbers.
+/// - Memory, its peak: every level's ring of M + A + max(A, 1) slices, the finest level's row of
+///   bricks as LZ4 leaves them (each at the compress bound), the node table, the writer's queue
+///   and batch, and each thread's gather and histogram; an f32 source's pre-pass (one slab) comes
+///   before all of them, so the peak is the larger of the two.
+/// - Disk, an upper bound (the compressed size cannot be known): every brick of every level
+///   stored at LZ4's worst case, its apron included, on whole 4 KiB LMDB pages, plus the node
+///   table, plus an eighth for the B-tree and the pages LMDB has freed but not yet reused. Data
+///   that compresses needs far less: BuildOptions::check_disk turns its check off.
+ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const BuildOptions& options, int threads);
+
+/// @brief Builds (or rebuilds) the store in `dir` from `source`, through a StoreBuildTarget.
+/// Before reading the source, refuses (Errc::resource) a build whose estimate_build_needs do not
+/// fit the memory available or, with check_disk, the free disk.
+/// @throws Error naming the source or the store; a failed build leaves an incomplete store, or,
+/// for a rebuild beside a complete one, the old store as it was.
 BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options,
                         Progress* progress = nullptr);
 

@@ -18,6 +18,7 @@
 #include "preprocess/box_filter.h"
 #include "preprocess/builder.h"
 #include "storage/store.h"
+#include "storage/store_lock.h"
 
 namespace brickyard {
 namespace {
@@ -436,6 +437,7 @@ OctreeBuildResult build_octree(const std::string& dir, const OctreeBuildOptions&
                                                     options.clamp->second))
         .with_field("--range");
   const auto start = std::chrono::steady_clock::now();
+  const StoreWriteLock lock(dir);  // an import or another build-octree may be writing it
   Store::OpenOptions open;
   open.writable = true;
   Store store(dir, open);

@@ -364,7 +364,11 @@ BuildResult build_tet_store(const TetClusterSource& source, const std::string& d
   nlohmann::json build = {{"cluster_tets", options.cluster_tets}};
   if (options.store_bvh) build["bvh"] = {{"method", "bih"}, {"leaf_size", kStoredBvhLeafSize}};
   const std::string build_json = build.dump();
-  if (prepare_store_directory(dir, source_json, build_json, options.force, result)) return result;
+  StoreBuildTarget target(dir, source_json, build_json, options.force, result);
+  if (target.up_to_date()) {
+    result.up_to_date = true;
+    return result;
+  }
 
   Manifest manifest;
   manifest.kind = DataKind::tetrahedral;
@@ -380,7 +384,7 @@ BuildResult build_tet_store(const TetClusterSource& source, const std::string& d
   env.growth = options.map_growth;
   env.max_map_size = options.map_growth ? uint64_t(1) << 44 : env.map_size;
   env.no_sync = true;
-  StoreWriter store(dir, manifest, env, options.batch_bytes);
+  auto store = std::make_unique<StoreWriter>(target.path(), manifest, env, options.batch_bytes);
 
   const uint64_t clusters = source.cluster_count();
   std::vector<TetCluster> table(static_cast<size_t>(clusters));
@@ -409,7 +413,7 @@ BuildResult build_tet_store(const TetClusterSource& source, const std::string& d
       for (int a = 0; a < 3; ++a)
         bounds.lo[a] = std::min(bounds.lo[a], double(e.entry.lo[a])), bounds.hi[a] = std::max(bounds.hi[a], double(e.entry.hi[a]));
       result.stored_bytes += e.record.size();
-      store.put_cluster_record(i, std::move(e.record));
+      store->put_cluster_record(i, std::move(e.record));
       if (progress) progress->advance(e.entry.tets);
     }
   }
@@ -420,7 +424,9 @@ BuildResult build_tet_store(const TetClusterSource& source, const std::string& d
   manifest.mesh.tets = tets;
   manifest.mesh.vertices = source.vertex_count();
   manifest.mesh.page_bytes = page_bytes;
-  store.finish(manifest, table, ranges);
+  store->finish(manifest, table, ranges);
+  store.reset();  // closed before its directory is swapped into place
+  target.commit();
   manifest.complete = true;
   result.manifest = manifest;
   result.seconds = watch.seconds();

@@ -20,7 +20,7 @@ namespace brickyard {
 
 /// @brief Bumped whenever the interface a module compiles against (renderer.h, the cache, the
 /// dataset views) changes in a way old modules cannot survive.
-inline constexpr int kModuleApiVersion = 1;
+inline constexpr int kModuleApiVersion = 2;  // 2: BackendInfo::pixel_state_bytes
 
 }  // namespace brickyard
 

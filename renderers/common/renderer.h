@@ -64,6 +64,9 @@ struct BackendInfo {
   /// of the budget, under LRU) and RenderContext::backend_pool_bytes() is the rest. Unset, or 0
   /// for some parameters (a pool sized by hand): the cache's L1 is the whole budget.
   std::function<uint32_t(const BackendParams&)> l1_staging_slots;
+  /// Bytes it keeps per pixel across a frame beyond the frame buffers (GigaVoxels' ray states,
+  /// carried from pass to pass): `render` and `bench` count them before they start.
+  uint32_t pixel_state_bytes = 0;
 
   bool accepts(DataKind kind, RenderMode mode) const;
 };

@@ -73,6 +73,7 @@ BackendEntry gigavoxels_backend() {
   e.info.modes = {RenderMode::iso, RenderMode::dvr};
   e.info.normals = {NormalMethod::analytic, NormalMethod::central, NormalMethod::forward};
   e.info.params = gigavoxels_params().declarations();
+  e.info.pixel_state_bytes = uint32_t(sizeof(gigavoxels::RayState));
 
   e.info.quality_param = "lod_ratio";
   e.info.quality_sweep = {4, 2, 1, 0.5, 0.25};

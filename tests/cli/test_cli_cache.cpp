@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -10,6 +11,7 @@
 
 #include "cache/trace.h"
 #include "core/image.h"
+#include "core/error.h"
 #include "test_util.h"
 
 namespace brickyard {
@@ -178,6 +180,22 @@ TEST(CliCache, CachebenchReplaysTracesOfSeveralRecordKindsOrOneOfThem) {
   const auto bad = brickyard("cachebench " + dir.file("mixed.txt") + " --kind voxel");
   EXPECT_EQ(bad.exit_code, 2) << bad.output;
   EXPECT_TRUE(contains(bad.output, "unknown record kind 'voxel'")) << bad.output;
+}
+
+TEST(CliCache, ASyntheticTraceThatCannotFitInMemoryIsRefusedBeforeItIsMade) {
+  // Each needs terabytes: refused on any machine, before a record is generated.
+  for (const std::string spec : {"zipf:objects=1000,requests=1e12", "scan:objects=1e9,passes=1e6",
+                                 "zipf:objects=1e13,requests=10"}) {
+    const auto start = std::chrono::steady_clock::now();
+    auto r = brickyard("cachebench --synthetic " + spec);
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 20.0) << spec;
+    EXPECT_EQ(r.exit_code, kExitOutOfResources) << r.output;
+    EXPECT_TRUE(contains(r.output, "cachebench --synthetic " + spec + " needs about")) << r.output;
+    EXPECT_TRUE(contains(r.output, "of memory")) << r.output;
+    EXPECT_TRUE(contains(r.output, "fewer requests, objects or passes in --synthetic")) << r.output;
+  }
+  // What fits is not refused.
+  EXPECT_EQ(brickyard("cachebench --synthetic zipf:objects=100,requests=1000 --policies lru --sizes 50%").exit_code, 0);
 }
 
 }  // namespace

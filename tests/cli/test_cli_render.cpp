@@ -18,6 +18,7 @@
 #include "core/brick_key.h"
 #include "core/image.h"
 #include "store_damage.h"
+#include "core/error.h"
 #include "test_util.h"
 
 namespace brickyard {
@@ -136,7 +137,7 @@ TEST(CliDamaged, RenderAndFlightNameUnreadableBricksAndExit3UnlessAllowed) {
     const std::string png = dir.file(backend + ".png");
     const auto r = brickyard("render " + dir.file("scene.json") + " --backend " + backend + " -o " + png + " --stats " +
                              dir.file(backend + ".json"));
-    EXPECT_EQ(r.exit_code, 3) << backend << "\n" << r.output;
+    EXPECT_EQ(r.exit_code, kExitDamaged) << backend << "\n" << r.output;
     EXPECT_THAT(r.output, HasSubstr("error: 1 record of the store could not be read")) << backend;
     EXPECT_THAT(r.output, HasSubstr(store + ": key " + key.to_string() + ": checksum mismatch")) << backend;
     EXPECT_THAT(r.output, HasSubstr("--allow-damaged")) << backend;
@@ -150,7 +151,7 @@ TEST(CliDamaged, RenderAndFlightNameUnreadableBricksAndExit3UnlessAllowed) {
   EXPECT_THAT(r.output, HasSubstr("warning: 1 record of the store could not be read"));
   // flight asks for every brick it would draw: the same report, the same exit status.
   r = brickyard("flight " + store + " --path " + std::string(BRICKYARD_SOURCE_DIR) + "/scenes/flight-orbit.json --frames 2 --lod 0.01");
-  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_EQ(r.exit_code, kExitDamaged) << r.output;
   EXPECT_THAT(r.output, HasSubstr(store + ": key " + key.to_string() + ": checksum mismatch"));
   r = brickyard("flight " + store + " --path " + std::string(BRICKYARD_SOURCE_DIR) + "/scenes/flight-orbit.json --frames 2 --lod 0.01 --allow-damaged");
   EXPECT_EQ(r.exit_code, 0) << r.output;
@@ -385,6 +386,44 @@ TEST_F(CliRender, AStillOfAnAsynchronousBackEndIsTheConvergedImageWithoutShowing
                                out.file("exact.png"));
   ASSERT_EQ(exact.exit_code, 0) << exact.output;
   EXPECT_EQ(read_png(out.file("still.png")), read_png(out.file("exact.png")));
+}
+
+TEST_F(CliRender, AnImageThatCannotFitInMemoryIsRefusedBeforeAnythingOpens) {
+  // Scenes of a store that does not exist: a check that lets the render through ends at once,
+  // with "no such store". What is free is capped by the environment, never raised.
+  auto scene = [&](const std::string& name, int side) {
+    const std::string path = dir_->file(name);
+    std::ofstream(path) << "{\"dataset\": \"no-such.store\", \"image\": {\"width\": " << side << ", \"height\": " << side
+                        << "}, " << kCamera << ", " << kIso << "}\n";
+    return path;
+  };
+  auto render = [&](const std::string& memory, const std::string& args) {
+    return testing::run_command("BRICKYARD_AVAILABLE_MEMORY=" + memory + " " + kExe + " render " + args + " -o " +
+                                dir_->file("huge.png"));
+  };
+  auto r = render("1GiB", scene("huge.json", 16384));
+  EXPECT_EQ(r.exit_code, kExitOutOfResources) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("render of 16384x16384 pixels needs about 9.25 GiB of memory"));
+  EXPECT_THAT(r.output, HasSubstr("but 1 GiB is available; a smaller image (the scene's image.width and image.height)"));
+  EXPECT_THAT(r.output, ::testing::Not(HasSubstr("no such store")));
+
+  // The back end's own state per pixel counts: GigaVoxels keeps a ray state for each.
+  const std::string medium = scene("medium.json", 4096);
+  r = render("2GiB", medium);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("no such store"));
+  r = render("2GiB", medium + " --backend gigavoxels");
+  EXPECT_EQ(r.exit_code, kExitOutOfResources) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("render of 4096x4096 pixels needs about"));
+
+  // bench renders the reference beside each back end, at --size.
+  const std::string small = write_scene("bench-huge.json", R"("image": {"width": 16, "height": 16}, )" + kCamera + ", " + kIso);
+  r = testing::run_command("BRICKYARD_AVAILABLE_MEMORY=1GiB " + kExe + " bench " + small + " --backends raymarch --size 16384,16384 --out " +
+                           dir_->file("bench-huge"));
+  EXPECT_EQ(r.exit_code, kExitOutOfResources) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("bench at 16384x16384 pixels needs about"));
+  EXPECT_THAT(r.output, HasSubstr("--size"));
+  EXPECT_FALSE(fs::exists(dir_->file("bench-huge")));
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -17,10 +18,14 @@
 
 #include <fmt/format.h>
 
+#include "core/error.h"
+#include "preprocess/builder.h"
 #include "preprocess/builder_test_util.h"
+#include "preprocess/volume_source.h"
 #include "storage/store.h"
 #include "storage/lmdb_env.h"
 #include "store_damage.h"
+#include "storage/store_lock.h"
 #include "test_util.h"
 
 extern char** environ;
@@ -260,7 +265,7 @@ TEST(CliStore, AFlippedBitInTheManifestOrATableIsACorruptStoreNamedAsSuch) {
       const std::string store = dir.file(fmt::format("{}_{}", c.database, bit));
       std::filesystem::copy(clean, store);
       ASSERT_GT(testing::flip_record_bit(store, c.database, c.key, bit), 0u);
-      for (const std::string& command : {"info", "verify"}) {
+      for (const std::string command : {"info", "verify"}) {
         const auto r = brickyard(command + " " + store);
         EXPECT_EQ(r.exit_code, 1) << command << " " << store << "\n" << r.output;
         EXPECT_TRUE(contains(r.output, store + ": ")) << r.output;
@@ -305,6 +310,138 @@ TEST(CliStore, KilledImportLeavesAnIncompleteStoreAndTheRerunEqualsACleanBuild) 
   EXPECT_TRUE(contains(r.output, "interrupted earlier build was discarded and rebuilt")) << r.output;
   ASSERT_EQ(brickyard("-q import field:fbm --size 256 --type u8 --brick-size 16 --out " + dir.file("clean")).exit_code, 0);
   EXPECT_TRUE(testing::all_records(Store(store)) == testing::all_records(Store(dir.file("clean"))));
+}
+
+/// A source whose reads fail past its first slices: a build that dies halfway, leaving an
+/// incomplete store, as a killed import does.
+class StopsHalfway final : public VolumeSource {
+ public:
+  StopsHalfway() : inner_(make_field_source(make_field("fbm"), {40, 40, 40}, ValueType::u8)) {}
+  std::string name() const override { return "stops halfway"; }
+  Vec3s dims() const override { return inner_->dims(); }
+  ValueType type() const override { return inner_->type(); }
+  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
+    if (z0 >= 20) throw Error(Errc::io, "stopped halfway");
+    inner_->read_slab(z0, z1, out);
+  }
+  std::string describe_json() const override { return inner_->describe_json(); }
+
+ private:
+  std::unique_ptr<VolumeSource> inner_;
+};
+
+const char* const kBesideTheStore[] = {".s.lock", ".s.rebuilding", ".s.replaced"};
+
+TEST(CliStore, ASecondWriterIsRefusedNamingTheFirstAndItsBuildIsNotDiscarded) {
+  testing::TempDir dir;
+  const std::string store = dir.file("s");
+  {
+    StopsHalfway source;
+    BuildOptions o;
+    o.brick_size = 16;
+    EXPECT_THROW(build_store(source, store, o), Error);
+  }
+  ASSERT_EQ(probe_store(store), StoreState::incomplete);
+  const std::string import = "import field:fbm --size 40 --type u8 --brick-size 16 --out " + store;
+  const std::string pid = std::to_string(::getpid());
+  {
+    const StoreWriteLock live(store);  // the incomplete store is a build in progress: its writer holds it
+    auto r = brickyard(import);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_TRUE(contains(r.output, store + ": another writer (pid " + pid + ") holds this store")) << r.output;
+    EXPECT_FALSE(contains(r.output, "wrote")) << r.output;
+    EXPECT_FALSE(contains(r.output, "discarded")) << r.output;
+    EXPECT_EQ(probe_store(store), StoreState::incomplete);
+    r = brickyard("info " + store);
+    EXPECT_TRUE(contains(r.output, "INCOMPLETE (being built by process " + pid + ")")) << r.output;
+    r = brickyard("verify " + store);
+    EXPECT_TRUE(contains(r.output, "INCOMPLETE (being built by process " + pid + ")")) << r.output;
+  }
+  auto r = brickyard("info " + store);
+  EXPECT_TRUE(contains(r.output, "INCOMPLETE (build interrupted)")) << r.output;
+  r = brickyard("-q " + import);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "interrupted earlier build was discarded and rebuilt")) << r.output;
+
+  // build-octree writes the store too.
+  {
+    const StoreWriteLock live(store);
+    r = brickyard("-q build-octree " + store);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_TRUE(contains(r.output, "another writer (pid " + pid + ") holds this store")) << r.output;
+  }
+  EXPECT_EQ(brickyard("-q build-octree " + store).exit_code, 0);
+  for (const char* sibling : kBesideTheStore) EXPECT_FALSE(std::filesystem::exists(dir.file(sibling))) << sibling;
+}
+
+TEST(CliStore, AFailedForcedRebuildLeavesTheOldStoreAndACompleteOneReplacesIt) {
+  testing::TempDir dir;
+  const std::string store = dir.file("s");
+  ASSERT_EQ(brickyard("-q import field:sphere --size 16 --type u8 --brick-size 8 --out " + store).exit_code, 0);
+  const auto records = testing::all_records(Store(store));
+  const std::string manifest = Store(store).manifest().to_json();
+
+  // Bad input found during the build (the f32 pre-pass finds the NaN), after --force has
+  // claimed the store: the old one must survive it.
+  std::vector<float> v(8 * 8 * 8, 1.0f);
+  v[5] = std::numeric_limits<float>::quiet_NaN();
+  write_floats(dir.file("nan.raw"), v);
+  auto r = brickyard("import " + dir.file("nan.raw") + " --dims 8 --type f32 --brick-size 8 --force --out " + store);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "non-finite voxels")) << r.output;
+  // And bad input found before it.
+  std::ofstream(dir.file("short.raw"), std::ios::binary) << std::string(100, '\x01');
+  r = brickyard("import " + dir.file("short.raw") + " --dims 8 --type u8 --force --out " + store);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(probe_store(store), StoreState::complete);
+  EXPECT_TRUE(testing::all_records(Store(store)) == records);
+  EXPECT_EQ(Store(store).manifest().to_json(), manifest);
+  EXPECT_EQ(brickyard("verify " + store).exit_code, 0);
+  for (const char* sibling : kBesideTheStore) EXPECT_FALSE(std::filesystem::exists(dir.file(sibling))) << sibling;
+
+  r = brickyard("-q import field:fbm --size 16 --type u8 --brick-size 8 --force --out " + store);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_EQ(brickyard("-q import field:fbm --size 16 --type u8 --brick-size 8 --out " + dir.file("clean")).exit_code, 0);
+  EXPECT_TRUE(testing::all_records(Store(store)) == testing::all_records(Store(dir.file("clean"))));
+  EXPECT_TRUE(contains(Store(store).manifest().source, "fbm")) << Store(store).manifest().source;
+  for (const char* sibling : kBesideTheStore) EXPECT_FALSE(std::filesystem::exists(dir.file(sibling))) << sibling;
+}
+
+TEST(CliStore, ImportsThatCannotFitAreRefusedBeforeTheyStart) {
+  testing::TempDir dir;
+  const std::string out = dir.file("s");
+  // What is free is capped (never raised) by the environment, so the answers do not depend on
+  // this machine; none of these may allocate what it asks for.
+  auto import = [&](const std::string& env, const std::string& args) {
+    const auto start = std::chrono::steady_clock::now();
+    auto r = testing::run_command(env + " " + kExe + " import " + args + " --out " + out);
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 20.0)
+        << "refused only after it started: " << args;
+    return r;
+  };
+  auto r = import("BRICKYARD_AVAILABLE_MEMORY=1GiB BRICKYARD_AVAILABLE_DISK=1GiB", "field:fbm --size 100000 --type f32");
+  EXPECT_EQ(r.exit_code, kExitOutOfResources) << r.output;
+  for (const char* part : {"import of 100000x100000x100000 f32 needs up to", "of disk (every brick at LZ4's worst case",
+                           "but 1 GiB is free there", "of memory", "but 1 GiB is available", "--brick-size"})
+    EXPECT_TRUE(contains(r.output, part)) << part << " missing from\n" << r.output;
+  EXPECT_FALSE(contains(r.output, "bad_alloc")) << r.output;
+
+  r = import("BRICKYARD_AVAILABLE_DISK=1GiB", "field:fbm --size 8192 --type u8");
+  EXPECT_EQ(r.exit_code, kExitOutOfResources) << r.output;
+  for (const std::string& part : {out + ": import of 8192x8192x8192 u8 needs up to", std::string("of disk"),
+                                 std::string("but 1 GiB is free there"), std::string("--no-disk-check")})
+    EXPECT_TRUE(contains(r.output, part)) << part << " missing from\n" << r.output;
+
+  // Past the disk check, memory still holds it back.
+  r = import("BRICKYARD_AVAILABLE_MEMORY=1GiB", "field:fbm --size 8192 --type u8 --no-disk-check");
+  EXPECT_EQ(r.exit_code, kExitOutOfResources) << r.output;
+  for (const char* part : {"import of 8192x8192x8192 u8 needs about", "of memory", "but 1 GiB is available",
+                           "a smaller --brick-size"})
+    EXPECT_TRUE(contains(r.output, part)) << part << " missing from\n" << r.output;
+  EXPECT_FALSE(contains(r.output, "of disk")) << r.output;
+
+  EXPECT_FALSE(std::filesystem::exists(out));
+  for (const char* sibling : kBesideTheStore) EXPECT_FALSE(std::filesystem::exists(dir.file(sibling))) << sibling;
 }
 
 }  // namespace

@@ -25,6 +25,9 @@ TEST(Error, ExitCodesSeparateUsageFromFailure) {
   EXPECT_EQ(exit_code(Errc::invalid_argument), 2);
   EXPECT_EQ(exit_code(Errc::io), 1);
   EXPECT_EQ(exit_code(Errc::corrupt), 1);
+  EXPECT_EQ(exit_code(Errc::resource), kExitOutOfResources);
+  EXPECT_NE(kExitOutOfResources, 1);
+  EXPECT_NE(kExitOutOfResources, 2);
 }
 
 TEST(Error, CheckMacrosReportBothOperands) {

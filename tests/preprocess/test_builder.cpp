@@ -2,6 +2,7 @@
 
 #include <cfloat>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -13,6 +14,7 @@
 #include "core/raw_volume.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
+#include "storage/store_lock.h"
 #include "test_util.h"
 
 namespace brickyard {
@@ -332,6 +334,165 @@ TEST(Builder, RerunsAreIdempotentAndDifferentParametersNeedForce) {
   const BuildResult r = run(other);
   EXPECT_FALSE(r.up_to_date);
   EXPECT_EQ(Store(s).format().brick_size, 16);
+}
+
+/// What a rebuild may leave beside the store `s` in `dir`: nothing, once it has finished.
+void expect_nothing_beside(const testing::TempDir& dir) {
+  for (const char* sibling : {".s.lock", ".s.rebuilding", ".s.replaced"})
+    EXPECT_FALSE(std::filesystem::exists(dir.file(sibling))) << sibling << " left behind";
+}
+
+TEST(Builder, AForcedRebuildThatFailsLeavesTheOldStoreAsItWas) {
+  testing::TempDir dir;
+  const std::string s = dir.file("s");
+  auto sphere = make_field_source(make_field("sphere"), {20, 20, 20}, ValueType::u8);
+  build_store(*sphere, s, small_bricks());
+  const auto records = testing::all_records(Store(s));
+  const std::string manifest = Store(s).manifest().to_json();
+
+  BuildOptions force = small_bricks();
+  force.force = true;
+  FailingSource failing(25);  // another source: only --force rebuilds over the sphere
+  EXPECT_THROW(build_store(failing, s, force), Error);
+  EXPECT_EQ(probe_store(s), StoreState::complete);
+  EXPECT_TRUE(testing::all_records(Store(s)) == records);
+  EXPECT_EQ(Store(s).manifest().to_json(), manifest);
+  expect_nothing_beside(dir);
+}
+
+TEST(Builder, AForcedRebuildReplacesTheStore) {
+  testing::TempDir dir;
+  const std::string s = dir.file("s");
+  auto sphere = make_field_source(make_field("sphere"), {20, 20, 20}, ValueType::u8);
+  build_store(*sphere, s, small_bricks());
+
+  BuildOptions other = small_bricks(16);
+  other.force = true;
+  auto again = make_field_source(make_field("sphere"), {20, 20, 20}, ValueType::u8);
+  const BuildResult r = build_store(*again, s, other);
+  EXPECT_FALSE(r.up_to_date);
+  EXPECT_FALSE(r.rebuilt_incomplete);
+  EXPECT_EQ(Store(s).format().brick_size, 16);
+  auto clean = make_field_source(make_field("sphere"), {20, 20, 20}, ValueType::u8);
+  build_store(*clean, dir.file("clean"), small_bricks(16));
+  EXPECT_TRUE(testing::all_records(Store(s)) == testing::all_records(Store(dir.file("clean"))));
+  expect_nothing_beside(dir);
+}
+
+TEST(Builder, ASecondWriterIsRefusedAndDoesNotDiscardTheLiveBuild) {
+  testing::TempDir dir;
+  const std::string s = dir.file("s");
+  FailingSource failing(25);
+  EXPECT_THROW(build_store(failing, s, small_bricks()), Error);
+  ASSERT_EQ(probe_store(s), StoreState::incomplete);
+  {
+    // Another process's build in progress, as this store's writer sees it: locked and incomplete.
+    const StoreWriteLock live(s);
+    FailingSource healthy(1 << 30);
+    try {
+      build_store(healthy, s, small_bricks());
+      FAIL() << "a second writer built over a live build";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("another writer"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(probe_store(s), StoreState::incomplete);
+  }
+  FailingSource healthy(1 << 30);
+  EXPECT_TRUE(build_store(healthy, s, small_bricks()).rebuilt_incomplete);  // no writer: it was interrupted
+  EXPECT_EQ(probe_store(s), StoreState::complete);
+}
+
+TEST(Builder, TheNextWriterReclaimsWhatAKilledRebuildLeftBeside) {
+  testing::TempDir dir;
+  const std::string s = dir.file("s");
+  auto build = [&](const std::string& where, int brick_size) {
+    auto source = make_field_source(make_field("sphere"), {20, 20, 20}, ValueType::u8);
+    return build_store(*source, where, small_bricks(brick_size));
+  };
+  // Killed while rebuilding: the old store in place, half a rebuild beside it.
+  build(s, 8);
+  FailingSource failing(25);
+  EXPECT_THROW(build_store(failing, store_sibling(s, "rebuilding"), small_bricks()), Error);
+  EXPECT_TRUE(build(s, 8).up_to_date);
+  expect_nothing_beside(dir);
+
+  // Killed between the two renames of a swap without an atomic exchange, before the second:
+  // the old store aside, a complete rebuild beside, nothing in place. The rebuild goes in.
+  std::filesystem::rename(s, store_sibling(s, "replaced"));
+  build(store_sibling(s, "rebuilding"), 16);
+  EXPECT_TRUE(build(s, 16).up_to_date);
+  EXPECT_EQ(Store(s).format().brick_size, 16);
+  expect_nothing_beside(dir);
+
+  // The same kill with the rebuild unfinished: the old store goes back.
+  std::filesystem::rename(s, store_sibling(s, "replaced"));
+  EXPECT_THROW(build_store(failing, store_sibling(s, "rebuilding"), small_bricks()), Error);
+  EXPECT_TRUE(build(s, 16).up_to_date);
+  expect_nothing_beside(dir);
+}
+
+TEST(Builder, RefusesToDeleteADirectoryBesideTheStoreThatIsNotOne) {
+  testing::TempDir dir;
+  const std::string s = dir.file("s");
+  std::filesystem::create_directories(store_sibling(s, "rebuilding"));
+  std::ofstream(store_sibling(s, "rebuilding") + "/thesis.tex") << "do not delete";
+  auto source = make_field_source(make_field("sphere"), {8, 8, 8}, ValueType::u8);
+  EXPECT_THROW(build_store(*source, s, small_bricks()), Error);
+  EXPECT_TRUE(std::filesystem::exists(store_sibling(s, "rebuilding") + "/thesis.tex"));
+}
+
+TEST(Builder, EstimatesItsMemoryAndAnUpperBoundOfItsDiskFromTheLayout) {
+  // 64^3 u8 in 32^3 bricks with a 1-voxel apron: levels of 32^3 (1 brick) and 64^3 (8 bricks).
+  // A brick record at LZ4's bound: 64 + 34^3 + 34^3/255 + 16 = 39538 bytes, on 10 pages of 4 KiB.
+  const ResourceNeeds small = estimate_build_needs({64, 64, 64}, ValueType::u8, BuildOptions{}, 1);
+  EXPECT_EQ(small.disk.bytes, uint64_t((9 * 40960 + 9 * 16) * 9 / 8));
+  const uint64_t rings = 34 * (32 * 32 + 64 * 64), row = 4 * 39538;
+  EXPECT_GE(small.memory.bytes, rings + row);
+  EXPECT_LT(small.memory.bytes, 2 * (rings + row) + 9 * 40960);  // no fixed 96 MiB for 9 bricks' worth of data
+
+  // The cases: far beyond any disk, or any memory, and each said so.
+  const ResourceNeeds u8 = estimate_build_needs({8192, 8192, 8192}, ValueType::u8, BuildOptions{}, 16);
+  EXPECT_GT(u8.disk.bytes, uint64_t(512) << 30);  // at least the raw grid
+  EXPECT_LT(u8.memory.bytes, uint64_t(16) << 30);
+  const ResourceNeeds f32 = estimate_build_needs({100000, 100000, 100000}, ValueType::f32, BuildOptions{}, 16);
+  EXPECT_GT(f32.memory.bytes, uint64_t(1) << 40);  // 34 slices of 40 GB
+  EXPECT_EQ(f32.task, "import of 100000x100000x100000 f32");
+  // Smaller bricks hold fewer slices and a thinner row of bricks, and more nodes: here the
+  // slices weigh more, and the message says which way to go.
+  BuildOptions small_bricks16;
+  small_bricks16.brick_size = 16;
+  EXPECT_LT(estimate_build_needs({8192, 8192, 8192}, ValueType::u8, small_bricks16, 16).memory.bytes, u8.memory.bytes);
+  EXPECT_NE(u8.memory.lower.find("a smaller --brick-size"), std::string::npos) << u8.memory.lower;
+}
+
+/// Sets an environment variable for the scope of a test.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const char* value) : name_(name) { ::setenv(name, value, 1); }
+  ~ScopedEnv() { ::unsetenv(name_); }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+};
+
+TEST(Builder, RefusesABuildThatCannotFitBeforeItReadsTheSource) {
+  testing::TempDir dir;
+  const ScopedEnv small_disk("BRICKYARD_AVAILABLE_DISK", "64KiB");
+  FailingSource never_read(0);  // any read fails: the refusal must come first
+  try {
+    build_store(never_read, dir.file("s"), small_bricks());
+    FAIL() << "a 40^3 store fitted in 64 KiB of disk";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::resource) << e.what();
+    EXPECT_NE(std::string(e.what()).find("of disk"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.file("s")));
+  BuildOptions unchecked = small_bricks();
+  unchecked.check_disk = false;
+  FailingSource healthy(1 << 30);
+  EXPECT_NO_THROW(build_store(healthy, dir.file("s"), unchecked));
 }
 
 TEST(Builder, RefusesToOverwriteSomethingThatIsNotAStore) {
