@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <iostream>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -120,7 +121,11 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
     throw Error(Errc::invalid_argument, fmt::format("'{}' is neither little nor big", o.endian)).with_field("--endian");
   if (o.endian == "big") spec.little_endian = false;
   spec.header_bytes = o.header_bytes;
-  if (!o.spacing.empty()) spec.spacing = parse_vec3(o.spacing, "--spacing");
+  if (!o.spacing.empty()) {
+    spec.spacing = parse_vec3(o.spacing, "--spacing");
+    if (const std::string problem = spacing_problem(spec.spacing); !problem.empty())
+      throw Error(Errc::invalid_argument, problem).with_field("--spacing");
+  }
   if (!o.origin.empty()) spec.origin = parse_vec3(o.origin, "--origin");
   return open_raw_source(o.source, spec);
 }
@@ -192,8 +197,22 @@ std::string sparkline(const Histogram& h, int width) {
   return out;
 }
 
+void print_info(const std::string& path, const Store& store, bool json);
+
+/// What a store holds; an incomplete one is described as far as it goes, and then the exit
+/// status says it cannot be used (a script that checks `info` must not go on to render it).
 void run_info(const std::string& path, bool json) {
   Store store(path, {.allow_incomplete = true});
+  print_info(path, store, json);
+  if (store.manifest().complete) return;
+  const bool being_built = store_writer_pid(path).has_value();
+  throw Error(Errc::format, fmt::format("the store is incomplete ({}): {}", incomplete_reason(path),
+                                        being_built ? "it cannot be used until that build finishes"
+                                                    : "run the import again to finish it"))
+      .with_file(path);
+}
+
+void print_info(const std::string& path, const Store& store, bool json) {
   const Manifest& m = store.manifest();
   if (json) {
     std::cout << m.to_json() << '\n';
@@ -365,11 +384,11 @@ int run_verify(const std::string& path) {
 
 // ----------------------------------------------------------------------------------- export
 
-void run_export(const std::string& path, int level, const std::string& box_text, const std::string& out,
+void run_export(const std::string& path, std::optional<int> level_given, const std::string& box_text, const std::string& out,
                 const std::string& grid, const std::string& encoding) {
   Store store(path);
   if (store.kind() == DataKind::tetrahedral) {
-    if (level >= 0 || !box_text.empty() || !grid.empty())
+    if (level_given || !box_text.empty() || !grid.empty())
       throw Error(Errc::invalid_argument, "--level, --box and --grid apply to grids; a mesh exports whole").with_file(path);
     return export_mesh(store, out, encoding.empty() ? "appended" : encoding);
   }
@@ -379,11 +398,21 @@ void run_export(const std::string& path, int level, const std::string& box_text,
     const auto v = parse_int_list(box_text, 6, "--box");
     box = VoxelBox{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
   }
-  if (level < 0) level = store.layout().finest();
+  // The name says the format: a raw file written under an image's or another format's name
+  // would be read as that format by the next tool.
+  const bool to_vdb = has_extension(out, {".vdb"});
+  if (!to_vdb && !has_extension(out, {".raw", ".bin", ".dat"}) && !fs::path(out).extension().empty())
+    throw Error(Errc::invalid_argument,
+                fmt::format("a grid exports to raw bytes (.raw, .bin or .dat, with a .json sidecar beside it) or "
+                            "to .vdb; '{}' is neither",
+                            fs::path(out).extension().string()))
+        .with_field("--out")
+        .with_file(out);
+  const int level = level_given.value_or(store.layout().finest());
   const VoxelBox region = export_region(store, level, box);
   check_writable(out);  // the VDB writer opens its file only after the whole export
   Progress progress(fmt::format("export level {}", level), uint64_t(volume(region.size())), "voxels");
-  if (has_extension(out, {".vdb"})) {
+  if (to_vdb) {
     export_vdb(store, level, region, out, grid, &progress);
     progress.finish();
     std::cout << fmt::format("wrote {}\n", out);
@@ -489,7 +518,7 @@ void add_store_commands(CLI::App& app, int& exit_status) {
   {
     struct ExportOptions {
       std::string store, box, out, grid, encoding;
-      int level = -1;
+      std::optional<int> level;
     };
     auto o = std::make_shared<ExportOptions>();
     auto* cmd = app.add_subcommand("export", "Write one level (or a box of it) as a raw file or an OpenVDB grid; a mesh as .vtu");

@@ -110,7 +110,12 @@ Camera read_camera(JsonObjectReader r, double fallback_fov) {
   cam.up = r.vec3("up", Vec3d(0, 0, 1));
   cam.fov_degrees = r.number("fov_degrees", fallback_fov, 1e-3, 179.0);
   if (length(cam.target - cam.eye) == 0) throw r.error("target", "eye and target coincide");
-  if (length(cross(cam.target - cam.eye, cam.up)) == 0) throw r.error("up", "up is parallel to the viewing direction");
+  // Nearly parallel is as bad as parallel: the image's up would follow rounding error.
+  const Vec3d view = cam.target - cam.eye;
+  if (length(cam.up) == 0) throw r.error("up", "up is the zero vector");
+  if (length(cross(view, cam.up)) <= 1e-6 * length(view) * length(cam.up))
+    throw r.error("up", fmt::format("up ({:g}, {:g}, {:g}) points {} the viewing direction, so no way is up in the image",
+                                    cam.up.x, cam.up.y, cam.up.z, dot(view, cam.up) > 0 ? "along" : "against"));
   r.finish();
   return cam;
 }

@@ -9,13 +9,21 @@
 
 namespace brickyard {
 
+std::string json_error_message(const nlohmann::json::exception& e) {
+  std::string_view what = e.what();
+  if (what.starts_with("[json.exception.")) {
+    if (const size_t end = what.find("] "); end != std::string_view::npos) what.remove_prefix(end + 2);
+  }
+  return fmt::format("not valid JSON: {}", what);
+}
+
 nlohmann::json read_json_file(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   try {
     return nlohmann::json::parse(in, nullptr, true, /*ignore_comments=*/true);
-  } catch (const nlohmann::json::parse_error& e) {
-    throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(path);
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(Errc::format, json_error_message(e)).with_file(path);
   }
 }
 

@@ -24,6 +24,10 @@ namespace brickyard {
 /// @brief Parses a JSON file (comments allowed); Error(io) or Error(format) naming the file.
 nlohmann::json read_json_file(const std::string& path);
 
+/// @brief "not valid JSON: " and what nlohmann found, without its "[json.exception.*]" tag
+/// (syntax errors, and numbers too large for a double, such as 1e999).
+std::string json_error_message(const nlohmann::json::exception& e);
+
 class JsonObjectReader {
  public:
   /// @param where the key path of this object, "" for the top level ("shading" for a member).

@@ -1,6 +1,9 @@
 #include "core/raw_volume.h"
 
+#include <algorithm>
+#include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -8,10 +11,12 @@
 #include <sstream>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "core/json_reader.h"
 
 namespace brickyard {
 
@@ -25,6 +30,14 @@ std::optional<uint64_t> checked_grid_bytes(const Vec3s& dims, ValueType t) {
   if (__builtin_mul_overflow(n, static_cast<uint64_t>(size_of(t)), &n)) return std::nullopt;
   if (n > static_cast<uint64_t>(INT64_MAX)) return std::nullopt;
   return n;
+}
+
+std::string spacing_problem(const Vec3d& spacing) {
+  for (int a = 0; a < 3; ++a)
+    if (!(std::isfinite(spacing[a]) && spacing[a] > 0))
+      return fmt::format("spacing ({:g}, {:g}, {:g}): every axis needs a positive, finite distance between samples",
+                         spacing.x, spacing.y, spacing.z);
+  return {};
 }
 
 std::string raw_sidecar_path(const std::string& raw_path) { return raw_path + ".json"; }
@@ -84,10 +97,18 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
   json j;
   try {
     j = json::parse(in);
-  } catch (const json::parse_error& e) {
-    throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(path);
+  } catch (const json::exception& e) {
+    throw Error(Errc::format, json_error_message(e)).with_file(path);
   }
   if (!j.is_object()) throw Error(Errc::format, "expected a JSON object").with_file(path);
+  // A key this build does not know is a typo or a newer writer: either way its meaning would be lost.
+  static constexpr std::array kKnownKeys = {"brickyard_raw", "dims",   "type",          "endianness", "spacing", "origin",
+                                            "value_range",   "quantization", "source", "source_params", "bytes", "xxh3_64"};
+  for (auto it = j.begin(); it != j.end(); ++it)
+    if (std::find(kKnownKeys.begin(), kKnownKeys.end(), it.key()) == kKnownKeys.end())
+      throw Error(Errc::format, fmt::format("unknown key (a sidecar has: {})", fmt::join(kKnownKeys, ", ")))
+          .with_file(path)
+          .with_field(it.key());
   const int version = get_as<int>(j, "brickyard_raw", path);
   if (version > kRawSidecarVersion)
     throw Error(Errc::unsupported, fmt::format("sidecar version {} is newer than this build reads ({})", version,
@@ -111,6 +132,8 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
     throw Error(Errc::format, fmt::format("'{}' is neither 'little' nor 'big'", endian)).with_file(path).with_field("endianness");
   info.little_endian = endian == "little";
   info.spacing = get_vec3<double>(j, "spacing", path);
+  if (const std::string problem = spacing_problem(info.spacing); !problem.empty())
+    throw Error(Errc::format, problem).with_file(path).with_field("spacing");
   info.origin = get_vec3<double>(j, "origin", path);
   auto range = get_as<std::vector<double>>(j, "value_range", path);
   if (range.size() != 2 || range[0] > range[1])
@@ -122,7 +145,13 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
   }
   if (j.contains("source")) info.source = get_as<std::string>(j, "source", path);
   if (auto p = j.find("source_params"); p != j.end() && p->is_object())
-    for (auto it = p->begin(); it != p->end(); ++it) info.source_params.emplace_back(it.key(), it.value().get<double>());
+    for (auto it = p->begin(); it != p->end(); ++it) {
+      if (!it.value().is_number())
+        throw Error(Errc::format, fmt::format("wrong type ({}), expected a number", it.value().type_name()))
+            .with_file(path)
+            .with_field("source_params." + it.key());
+      info.source_params.emplace_back(it.key(), it.value().get<double>());
+    }
   info.bytes = get_as<uint64_t>(j, "bytes", path);
   if (j.contains("xxh3_64")) {
     const auto hex = get_as<std::string>(j, "xxh3_64", path);

@@ -35,6 +35,10 @@ struct RawVolumeInfo {
   int64_t voxel_count() const { return volume(dims); }
 };
 
+/// @brief Why `spacing` cannot place a grid in space (an axis zero, negative or not finite),
+/// or empty when it can.
+std::string spacing_problem(const Vec3d& spacing);
+
 /// @brief Bytes of a dims grid of type t, or nullopt when the count overflows 64 bits or a
 /// dimension is below 1.
 std::optional<uint64_t> checked_grid_bytes(const Vec3s& dims, ValueType t);

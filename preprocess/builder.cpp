@@ -24,6 +24,7 @@
 #include <tbb/task_arena.h>
 
 #include "core/error.h"
+#include "core/raw_volume.h"
 #include "core/parallel.h"
 #include "core/progress.h"
 #include "core/timing.h"
@@ -640,6 +641,8 @@ ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const Buil
 
 BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options, Progress* progress) {
   validate(options);
+  if (const std::string problem = spacing_problem(source.spacing()); !problem.empty())
+    throw Error(Errc::format, problem).with_file(source.name()).with_field("spacing");
   Stopwatch watch;
   BuildResult result;
   const GridLayout layout = GridLayout::make(source.dims(), options.brick_size);

@@ -164,6 +164,10 @@ NrrdHeader parse_header(const std::string& path) {
     if (v.size() != 9) throw Error(Errc::format, "expected 3 direction vectors").with_file(path).with_field("space directions");
     for (int a = 0; a < 3; ++a) h.spacing[a] = std::sqrt(v[size_t(3 * a)] * v[size_t(3 * a)] + v[size_t(3 * a + 1)] * v[size_t(3 * a + 1)] + v[size_t(3 * a + 2)] * v[size_t(3 * a + 2)]);
   }
+  if (const std::string problem = spacing_problem(h.spacing); !problem.empty())
+    throw Error(Errc::format, problem)
+        .with_file(path)
+        .with_field(fields.count("spacings") ? "spacings" : "space directions");
   if (auto it = fields.find("space origin"); it != fields.end()) {
     const auto o = parse_doubles(it->second, path, "space origin");
     if (o.size() != 3) throw Error(Errc::format, "expected 3 coordinates").with_file(path).with_field("space origin");
@@ -204,10 +208,20 @@ class ByteStream {
       else
 #endif
         got = ::read(fd_, out + done, want);
+#if BRICKYARD_HAVE_ZLIB
+      if (gzip_ && got < 0) {
+        int code = 0;
+        const char* why = gzerror(gz_, &code);
+        throw Error(Errc::format, fmt::format("the gzip data is corrupt after {} decompressed bytes: {}", position_ + done,
+                                              why && *why ? why : "zlib error"))
+            .with_file(file_);
+      }
+#endif
       if (got <= 0)
-        throw Error(Errc::format, fmt::format("data ends after {} bytes: the file is truncated or its sizes are wrong",
-                                              position_ + done))
-            .with_file(nrrd_path_);
+        throw Error(Errc::format, fmt::format("{} ends after {} bytes but its sizes need {}: the file is truncated or its "
+                                              "sizes are wrong",
+                                              gzip_ ? "the decompressed data" : "the data", position_ + done, position_ + n))
+            .with_file(gzip_ ? file_ : nrrd_path_);
       done += size_t(got);
     }
     position_ += n;
@@ -227,6 +241,18 @@ class ByteStream {
       throw Error(Errc::io, fmt::format("cannot seek: {}", std::strerror(errno))).with_file(file_);
 #if BRICKYARD_HAVE_ZLIB
     if (gzip_) {
+      // zlib reads data without a gzip header through unchanged: check the magic ourselves.
+      unsigned char magic[2] = {0, 0};
+      const ssize_t got = ::pread(fd_, magic, 2, off_t(offset_));
+      if (got != 2 || magic[0] != 0x1f || magic[1] != 0x8b) {
+        close();
+        throw Error(Errc::format, got != 2 ? fmt::format("the header says encoding gzip, but no data follows at byte {}", offset_)
+                                           : fmt::format("the header says encoding gzip, but the data at byte {} starts "
+                                                         "with {:02x} {:02x}, not gzip's 1f 8b",
+                                                         offset_, magic[0], magic[1]))
+            .with_file(file_)
+            .with_field("encoding");
+      }
       gz_ = gzdopen(fd_, "rb");
       if (!gz_) throw Error(Errc::resource, "cannot start gzip decoding").with_file(file_);
       gzbuffer(gz_, 1 << 20);

@@ -10,6 +10,7 @@
 #include <cstring>
 
 #include <fmt/format.h>
+#include <xxhash.h>
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
@@ -58,6 +59,7 @@ class RawSource final : public VolumeSource {
     }
     ::madvise(map, size_, MADV_SEQUENTIAL);
     map_ = static_cast<const std::byte*>(map);
+    if (spec.xxh3_64) check_checksum(*spec.xxh3_64);
   }
   ~RawSource() override {
     ::munmap(const_cast<std::byte*>(map_), size_);
@@ -98,6 +100,21 @@ class RawSource final : public VolumeSource {
   }
 
  private:
+  /// The sidecar's checksum against the file, before anything is built from it: a file
+  /// rewritten or damaged since its sidecar would otherwise import as if it were the original.
+  void check_checksum(uint64_t expected) {
+    const uint64_t actual = XXH3_64bits(map_, size_);
+    if (actual == expected) return;
+    ::munmap(const_cast<std::byte*>(map_), size_);
+    ::close(fd_);
+    throw Error(Errc::format, fmt::format("the file's XXH3-64 is {:016x}, its sidecar {}.json says {:016x}: the file "
+                                          "changed since the sidecar was written (describe it with --dims and "
+                                          "--type to import it as it is now)",
+                                          actual, path_, expected))
+        .with_file(path_)
+        .with_field("xxh3_64");
+  }
+
   void swap_bytes(std::span<std::byte> data) const {
     const size_t n = size_of(spec_.type);
     for (size_t i = 0; i + n <= data.size(); i += n) std::reverse(data.begin() + long(i), data.begin() + long(i + n));

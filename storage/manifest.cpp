@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/json_reader.h"
 
 namespace brickyard {
 
@@ -106,8 +107,8 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
   json j;
   try {
     j = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw Error(Errc::format, fmt::format("manifest is not valid JSON: {}", e.what())).with_file(path);
+  } catch (const json::exception& e) {
+    throw Error(Errc::format, "manifest: " + json_error_message(e)).with_file(path);
   }
   if (!j.is_object()) throw Error(Errc::format, "manifest is not a JSON object").with_file(path);
   Reader r{j, path};

@@ -270,8 +270,8 @@ Scene parse_scene(const std::string& json_text, const std::string& file) {
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(json_text, nullptr, true, /*ignore_comments=*/true);
-  } catch (const nlohmann::json::parse_error& e) {
-    throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(file);
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(Errc::format, json_error_message(e)).with_file(file);
   }
   return read_scene(j, file);
 }

@@ -164,6 +164,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadImport{"bad_brick_size", "", "import RAW --dims 10 --type u8 --brick-size 24 --out OUT", "not a power of two in [8, 128]"},
         BadImport{"bad_range", "", "import RAW --dims 10 --type u8 --range 5,1 --out OUT", "'5,1' is not LO,HI"},
         BadImport{"not_a_vdb", "", "import RAW.vdb --out OUT", "v.raw.vdb"},
+        BadImport{"zero_spacing", "", "import RAW --dims 10 --type u8 --spacing 0,0,0 --out OUT", "field '--spacing': spacing (0, 0, 0): every axis needs a positive, finite distance"},
+        BadImport{"negative_spacing", "", "import RAW --dims 10 --type u8 --spacing 1,-1,1 --out OUT", "field '--spacing': spacing (1, -1, 1)"},
         BadImport{"full_map", "", "import field:fbm --size 96 --type f32 --map-size 256KiB --no-map-growth --out OUT", "store is full"}),
     [](const auto& param_info) { return std::string(param_info.param.name); });
 
@@ -353,12 +355,18 @@ TEST(CliStore, ASecondWriterIsRefusedNamingTheFirstAndItsBuildIsNotDiscarded) {
     EXPECT_FALSE(contains(r.output, "discarded")) << r.output;
     EXPECT_EQ(probe_store(store), StoreState::incomplete);
     r = brickyard("info " + store);
+    EXPECT_EQ(r.exit_code, 1) << r.output;  // described, and not usable: a script must not go on to render it
     EXPECT_TRUE(contains(r.output, "INCOMPLETE (being built by process " + pid + ")")) << r.output;
+    EXPECT_TRUE(contains(r.output, "it cannot be used until that build finishes")) << r.output;
     r = brickyard("verify " + store);
     EXPECT_TRUE(contains(r.output, "INCOMPLETE (being built by process " + pid + ")")) << r.output;
   }
   auto r = brickyard("info " + store);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "INCOMPLETE (build interrupted)")) << r.output;
+  EXPECT_TRUE(contains(r.output, "run the import again to finish it")) << r.output;
+  r = brickyard("info --json " + store);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
   r = brickyard("-q " + import);
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(contains(r.output, "interrupted earlier build was discarded and rebuilt")) << r.output;
@@ -442,6 +450,58 @@ TEST(CliStore, ImportsThatCannotFitAreRefusedBeforeTheyStart) {
 
   EXPECT_FALSE(std::filesystem::exists(out));
   for (const char* sibling : kBesideTheStore) EXPECT_FALSE(std::filesystem::exists(dir.file(sibling))) << sibling;
+}
+
+}  // namespace
+}  // namespace brickyard
+
+namespace brickyard {
+namespace {
+
+TEST(CliStore, ASidecarMustDescribeItsFileExactly) {
+  testing::TempDir dir;
+  const std::string raw = dir.file("v.raw");
+  ASSERT_EQ(brickyard("-q generate sphere --size 16 --type u8 --out " + raw).exit_code, 0);
+  ASSERT_EQ(brickyard("-q import " + raw + " --out " + dir.file("ok")).exit_code, 0);
+  {
+    std::fstream f(raw, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(100);
+    f.put('\x7f');
+  }
+  auto r = brickyard("-q import " + raw + " --out " + dir.file("changed"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, raw + ": field 'xxh3_64': the file's XXH3-64 is")) << r.output;
+  EXPECT_TRUE(contains(r.output, "the file changed since the sidecar was written")) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("changed")));
+  // Described by flags instead, the file imports as it is now.
+  r = brickyard("-q import " + raw + " --dims 16 --type u8 --out " + dir.file("as_is"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+
+  std::string sidecar = testing::read_file(raw + ".json");
+  sidecar.insert(sidecar.find('{') + 1, "\"spacng\": [1, 1, 1], ");
+  std::ofstream(raw + ".json") << sidecar;
+  r = brickyard("-q import " + raw + " --out " + dir.file("typo"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, raw + ".json: field 'spacng': unknown key")) << r.output;
+}
+
+TEST(CliStore, ExportRefusesLevelsThatDoNotExistAndNamesItDoesNotWrite) {
+  testing::TempDir dir;
+  ASSERT_EQ(brickyard("-q import field:sphere --size 32 --type u8 --brick-size 16 --out " + dir.file("s")).exit_code, 0);
+  auto r = brickyard("-q export " + dir.file("s") + " --level -1 --out " + dir.file("x.raw"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "field '--level': level -1 does not exist (the store has levels 0 to")) << r.output;
+  r = brickyard("-q export " + dir.file("s") + " --level 9 --out " + dir.file("x.raw"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  r = brickyard("-q export " + dir.file("s") + " --out " + dir.file("x.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "field '--out': a grid exports to raw bytes (.raw, .bin or .dat")) << r.output;
+  EXPECT_TRUE(contains(r.output, "'.png' is neither")) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("x.png")));
+  EXPECT_FALSE(std::filesystem::exists(dir.file("x.raw")));
+  r = brickyard("-q export " + dir.file("s") + " --level 0 --out " + dir.file("x.bin"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::exists(dir.file("x.bin.json")));
 }
 
 }  // namespace

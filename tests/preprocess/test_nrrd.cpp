@@ -130,7 +130,19 @@ TEST(Nrrd, BadFilesAreClearErrors) {
   std::ofstream(dir.file("gzshort.nrrd"), std::ios::binary)
       << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 8 8 8\nencoding: gzip\n\n" << gzip(std::string(100, 'x'));
   expect_error(dir.file("gzshort.nrrd"), Errc::format, "truncated");
+  // zlib would pass bytes without a gzip header through as they are: named as not gzip.
+  std::ofstream(dir.file("gznot.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 8 8 8\nencoding: gzip\n\n" << std::string(5000, 'x');
+  expect_error(dir.file("gznot.nrrd"), Errc::format, "starts with 78 78, not gzip's 1f 8b");
+  std::string damaged = gzip(std::string(4096, 'x'));
+  for (size_t i = 12; i < damaged.size() - 8; ++i) damaged[i] = char(damaged[i] ^ 0x5a);
+  std::ofstream(dir.file("gzbad.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 16 16 16\nencoding: gzip\n\n" << damaged;
+  expect_error(dir.file("gzbad.nrrd"), Errc::format, "the gzip data is corrupt after");
 #endif
+  std::ofstream(dir.file("flat.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nspacings: 1 0 1\nencoding: raw\n\n12345678";
+  expect_error(dir.file("flat.nrrd"), Errc::format, "positive, finite");
   std::ofstream(dir.file("type.nrrd")) << "NRRD0004\ntype: block\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n12345678";
   expect_error(dir.file("type.nrrd"), Errc::unsupported, "NRRD type 'block'");
 }
