@@ -150,10 +150,12 @@ void run_cachebench(const CachebenchOptions& o) {
                                            : 0;
   Trace trace = !o.synthetic.empty() ? synthetic_trace(o.synthetic, replays)
                 : o.format.empty()   ? read_trace(o.trace)
-                                     : read_trace(o.trace, parse_trace_format(o.format));
+                                     : read_trace(o.trace, naming_options({{"trace_format", "--format"}}, [&] {
+                                         return parse_trace_format(o.format);
+                                       }));
   if (!o.kind.empty()) trace = trace.of_kind(record_kind_from_string(o.kind, "--kind"));
   if (!o.convert.empty()) {
-    write_trace(o.convert, trace, parse_trace_format(o.to));
+    write_trace(o.convert, trace, naming_options({{"trace_format", "--to"}}, [&] { return parse_trace_format(o.to); }));
     std::cout << fmt::format("wrote {} ({} records, {} format)\n", o.convert, trace.records.size(), o.to);
     return;
   }
@@ -394,7 +396,9 @@ void add_cache_commands(CLI::App& app, int& exit_status) {
                   "Exit 0 when records of the store cannot be read (listed; without it the exit status is 3)");
     cmd->callback([o, frames, &exit_status] {
       o->frames_given = frames->count() > 0;
-      exit_status = run_flight(*o);
+      exit_status = naming_options({{"l1_bytes", "--l1"}, {"l1_slots", "--l1"}, {"slots", "--l1"}, {"l2_bytes", "--l2"},
+                                    {"loader_threads", "--loaders"}, {"policy", "--l1-policy"}, {"l2_policy", "--l2-policy"}},
+                                   [&] { return run_flight(*o); });
     });
   }
   {
@@ -415,7 +419,7 @@ void add_cache_commands(CLI::App& app, int& exit_status) {
   cmd->add_flag("--windows", o->windows, "Print the miss ratio over time (frame windows) at the smallest size");
   cmd->add_option("--convert", o->convert, "Write the trace to this file in --to format instead of replaying it");
   cmd->add_option("--to", o->to, "Format for --convert: brickyard, oracleGeneral, text")->capture_default_str();
-  cmd->callback([o] { run_cachebench(*o); });
+  cmd->callback([o] { naming_options({{"policy", "--policies"}}, [&] { run_cachebench(*o); }); });
   }
 }
 

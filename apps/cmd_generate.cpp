@@ -10,6 +10,8 @@
 #include "apps/parse.h"
 #include "core/error.h"
 #include "core/progress.h"
+#include "core/raw_volume.h"
+#include "core/resources.h"
 #include "core/units.h"
 #include "fields/field.h"
 #include "fields/grid.h"
@@ -62,13 +64,12 @@ void run_generate(const GenerateOptions& o) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec))
     throw Error(Errc::not_found, "the output directory does not exist").with_file(dir.string());
-  const auto space = fs::space(dir, ec);
   // Raw file plus its temporary twin never coexist, so one copy's worth of space is needed.
-  if (!ec && *bytes > space.available)
-    throw Error(Errc::resource, fmt::format("{}x{}x{} {} needs {}, but only {} is free there", dims.x, dims.y, dims.z,
-                                            to_string(type), format_bytes(double(*bytes)),
-                                            format_bytes(double(space.available))))
-        .with_file(dir.string());
+  ResourceNeeds needs;
+  needs.task = fmt::format("generate of {}x{}x{} {}", dims.x, dims.y, dims.z, to_string(type));
+  needs.disk = {*bytes, "the raw file", "a smaller --size or a narrower --type"};
+  needs.disk_path = dir.string();
+  check_resources(needs);
 
   GridSampler sampler(*field, dims, type);
   Progress progress(fmt::format("generate {}", field->name()), uint64_t(volume(dims)), "voxels");

@@ -2,16 +2,20 @@
 // at a sweep of its quality knob against the reference renderer.
 
 #include <algorithm>
+#include <charconv>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <string_view>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "apps/commands.h"
 #include "apps/parse.h"
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/raw_volume.h"
 #include "core/resources.h"
@@ -27,8 +31,9 @@ namespace fs = std::filesystem;
 namespace {
 
 /// "all", or a comma-separated list of N and A-B (inclusive) -> frame numbers within
-/// [0, count), in the order given ("0,90,10-12": a jump, then three frames).
-std::vector<int> parse_frames(const std::string& text, int count) {
+/// [0, count), in the order given ("0,90,10-12": a jump, then three frames). `option` is the
+/// flag that gave the text, for errors.
+std::vector<int> parse_frames(const std::string& text, int count, std::string_view option = "--frames") {
   std::vector<int> out;
   if (text.empty()) return {0};
   if (text == "all") {
@@ -36,15 +41,38 @@ std::vector<int> parse_frames(const std::string& text, int count) {
     return out;
   }
   for (const std::string& item : split_list(text)) {
-    const size_t dash = item.find('-');
-    const auto ints = parse_int_list(dash == std::string::npos ? item : item.substr(0, dash) + "," + item.substr(dash + 1),
-                                     dash == std::string::npos ? 1 : 2, "--frames");
+    const size_t dash = item.find('-', 1);
+    std::vector<int64_t> ints;
+    try {
+      ints = parse_int_list(dash == std::string::npos ? item : item.substr(0, dash) + "," + item.substr(dash + 1),
+                            dash == std::string::npos ? 1 : 2, option);
+    } catch (const Error&) {
+      throw Error(Errc::invalid_argument, fmt::format("'{}' is not a frame N or a range A-B", item)).with_field(option);
+    }
     const int64_t a = ints[0], b = ints.size() > 1 ? ints[1] : ints[0];
-    if (a < 0 || b < a || b >= count)
-      throw Error(Errc::invalid_argument, fmt::format("'{}' is outside the scene's frames 0-{}", item, count - 1)).with_field("--frames");
+    if (b < a)
+      throw Error(Errc::invalid_argument, fmt::format("'{}' runs backwards: write the first frame first", item))
+          .with_field(option);
+    if (a < 0 || b >= count)
+      throw Error(Errc::invalid_argument, fmt::format("'{}' is outside the scene's frames 0-{}", item, count - 1)).with_field(option);
     for (int64_t f = a; f <= b; ++f) out.push_back(int(f));
   }
   return out;
+}
+
+bool has_png_extension(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return ext == ".png";
+}
+
+/// A directory outputs go into: absent (it is created) or a directory, never a file.
+void check_output_directory(const std::string& dir, std::string_view option) {
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    throw Error(Errc::invalid_argument, "exists and is not a directory: give a directory for the files it writes")
+        .with_field(option)
+        .with_file(dir);
 }
 
 /// out.png -> out_0007.png when rendering frames of a camera path.
@@ -125,6 +153,13 @@ int run_render(const RenderOptions& o) {
   }
   if (o.scene.empty()) throw Error(Errc::invalid_argument, "a scene file is required").with_field("SCENE");
   if (o.out.empty()) throw Error(Errc::invalid_argument, "an output PNG is required").with_field("-o");
+  for (const auto& [path, option] : {std::pair{&o.out, "-o"}, {&o.depth, "--depth"}, {&o.normals, "--normals"}}) {
+    if (path->empty()) continue;
+    refuse_to_replace_non_regular(*path);  // (a device or a FIFO is refused as such, whatever its name)
+    if (!has_png_extension(*path))
+      throw Error(Errc::invalid_argument, "images are written as PNG: give the file a .png name").with_field(option).with_file(*path);
+  }
+  if (!o.error_maps.empty()) check_output_directory(o.error_maps, "--error-maps");
   Scene scene = load_scene(o.scene);
   if (!o.dataset.empty()) scene.dataset = o.dataset;
   {
@@ -296,6 +331,7 @@ std::string safe_name(const std::string& s) {
 }
 
 void run_bench(const BenchOptions& o) {
+  if (!o.out.empty()) check_output_directory(o.out, "--out");
   Scene scene = load_scene(o.scene);
   if (!o.dataset.empty()) scene.dataset = o.dataset;
   if (!o.size.empty()) {
@@ -305,7 +341,7 @@ void run_bench(const BenchOptions& o) {
     scene.width = scene.camera.width = int(wh[0]);
     scene.height = scene.camera.height = int(wh[1]);
   }
-  const int frame = parse_frames(o.frame, scene.frames()).front();
+  const int frame = parse_frames(o.frame, scene.frames(), "--frame").front();
   const Manifest dataset_manifest = read_manifest(scene.dataset);
   const DataKind kind = dataset_manifest.kind;
   const int supersample = o.reference_supersample;
@@ -324,7 +360,13 @@ void run_bench(const BenchOptions& o) {
     const size_t eq = q.find('=');
     if (eq == std::string::npos || eq == 0) throw Error(Errc::invalid_argument, fmt::format("'{}' is not NAME=V1,V2,...", q)).with_field("--quality");
     std::vector<double> values;
-    for (const std::string& item : split_list(q.substr(eq + 1))) values.push_back(parse_assignment("v=" + item, "--quality").second);
+    for (const std::string& item : split_list(q.substr(eq + 1))) {
+      double v = 0;
+      const auto [end, ec] = std::from_chars(item.data(), item.data() + item.size(), v);
+      if (item.empty() || ec != std::errc() || end != item.data() + item.size() || !std::isfinite(v))
+        throw Error(Errc::invalid_argument, fmt::format("'{}' in '{}' is not a finite number", item, q)).with_field("--quality");
+      values.push_back(v);
+    }
     sweeps[q.substr(0, eq)] = values;
   }
 
@@ -504,7 +546,7 @@ void add_render_commands(CLI::App& app, int& exit_status) {
                     "box-filter it down: error against each pixel's mean over its area rather than its centre ray, the "
                     "truth for back ends that filter");
     cmd->add_option("--out", o->out, "Report directory (bench.md, bench.csv, equal-error.csv, error-vs-time.png, contact-sheet.png, images/)");
-    cmd->callback([o] { run_bench(*o); });
+    cmd->callback([o] { naming_options({{"backend", "--backends"}}, [&] { run_bench(*o); }); });
   }
 }
 

@@ -61,6 +61,7 @@ struct ImportOptions {
   bool no_shuffle = false, no_map_growth = false, force = false, octree = false, no_disk_check = false;
   // meshes
   MeshImportOptions mesh;
+  std::vector<std::string> given;  ///< the options on the command line, by their long names
 };
 
 bool has_extension(const std::string& path, std::initializer_list<const char*> exts) {
@@ -130,7 +131,43 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
   return open_raw_source(o.source, spec);
 }
 
+/// An option that does not apply to the source would be ignored: refused instead, naming the
+/// source kind it belongs to (`import field:sphere --dims 4` built a 256^3 grid).
+void refuse_options_for_other_sources(const ImportOptions& o) {
+  const std::string& src = o.source;
+  const bool mesh_field = src.rfind("mesh:", 0) == 0, mesh_file = !mesh_field && is_mesh_source(src);
+  const bool field = src.rfind("field:", 0) == 0;
+  const bool nrrd = !mesh_file && has_extension(src, {".nrrd", ".nhdr"}), vdb = !mesh_file && has_extension(src, {".vdb"});
+  const bool raw = !mesh_field && !mesh_file && !field && !nrrd && !vdb;
+  const std::string kind = mesh_field ? "a mesh:FIELD source" : mesh_file ? "a mesh file" : field ? "a field: source"
+                           : nrrd     ? "a NRRD file"          : vdb       ? "an OpenVDB file" : "a raw file";
+  static const std::set<std::string> raw_only = {"--dims", "--endian", "--header-bytes", "--spacing", "--origin"};
+  static const std::set<std::string> mesh_field_only = {"--cells", "--jitter", "--replicate", "--steps", "--move"};
+  static const std::set<std::string> mesh_file_only = {"--array", "--single-step"};
+  static const std::set<std::string> meshes_take = {"--cluster-tets", "--bvh", "--map-size", "--force", "--set"};
+  for (const std::string& opt : o.given) {
+    bool applies = true;
+    if (opt == "--out") continue;
+    if (raw_only.count(opt)) applies = raw;
+    else if (opt == "--type") applies = raw || field;
+    else if (opt == "--size") applies = field;
+    else if (opt == "--set") applies = field || mesh_field;
+    else if (opt == "--grid") applies = vdb;
+    else if (mesh_field_only.count(opt)) applies = mesh_field;
+    else if (mesh_file_only.count(opt)) applies = mesh_file;
+    else if (meshes_take.count(opt)) applies = opt == "--cluster-tets" || opt == "--bvh" ? (mesh_field || mesh_file) : true;
+    else if (mesh_field || mesh_file) applies = false;  // the grid build's options
+    if (!applies)
+      throw Error(Errc::invalid_argument, fmt::format("does not apply to {} ({}), and would be ignored", kind, src))
+          .with_field(opt);
+  }
+  if (mesh_field && o.mesh.move != 0 && o.mesh.steps < 2)
+    throw Error(Errc::invalid_argument, "moves the vertices from one time step to the next: give --steps 2 or more")
+        .with_field("--move");
+}
+
 void run_import(const ImportOptions& o) {
+  refuse_options_for_other_sources(o);
   if (is_mesh_source(o.source)) {
     MeshImportOptions m = o.mesh;
     m.source = o.source;
@@ -499,7 +536,11 @@ void add_store_commands(CLI::App& app, int& exit_status) {
                   "Start even when the free disk is below the store's worst case (every brick incompressible); for "
                   "data that compresses well")
         ->group(build);
-    cmd->callback([o] { run_import(*o); });
+    cmd->callback([o, cmd] {
+      for (const CLI::Option* opt : cmd->get_options())
+        if (opt->count() > 0 && !opt->get_positional()) o->given.push_back(opt->get_name());
+      naming_options({{"brick_size", "--brick-size"}}, [&] { run_import(*o); });
+    });
   }
   {
     auto path = std::make_shared<std::string>();

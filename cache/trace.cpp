@@ -68,7 +68,7 @@ TraceFormat parse_trace_format(std::string_view name) {
   if (name == "oracleGeneral" || name == "oracle-general") return TraceFormat::oracle_general;
   if (name == "text") return TraceFormat::text;
   throw Error(Errc::invalid_argument, fmt::format("unknown trace format '{}' (brickyard, oracleGeneral, text)", name))
-      .with_field("--format");
+      .with_field("trace_format");
 }
 
 TraceFormat trace_format_of(const std::string& path) {
@@ -169,6 +169,7 @@ std::vector<uint64_t> next_demand_access(const Trace& trace, const std::vector<u
 
 Trace read_trace(const std::string& path) {
   // Sniff the magic first: a brickyard trace is recognised whatever its name.
+  check_readable_file(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   char magic[8] = {};
@@ -182,6 +183,7 @@ Trace read_trace(const std::string& path) {
 }
 
 Trace read_trace(const std::string& path, TraceFormat format) {
+  check_readable_file(path);
   Trace t;
   if (format == TraceFormat::text) {
     std::ifstream in(path);
@@ -197,9 +199,13 @@ Trace read_trace(const std::string& path, TraceFormat format) {
       TraceRecord r;
       try {
         size_t used = 0;
+        // stoull takes "-5" as 2^64 - 5: a sign is not a key or a size.
+        if (key_text[0] == '-' || key_text[0] == '+')
+          throw std::invalid_argument(key_text);
         r.key = std::stoull(key_text, &used, 0);
         if (used != key_text.size()) throw std::invalid_argument(key_text);
         if (fields >> size_text) {
+          if (size_text[0] == '-' || size_text[0] == '+') throw std::invalid_argument(size_text);
           const unsigned long long s = std::stoull(size_text, &used);
           if (used != size_text.size() || s == 0 || s > UINT32_MAX) throw std::invalid_argument(size_text);
           r.size = uint32_t(s);

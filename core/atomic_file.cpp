@@ -10,16 +10,32 @@
 
 namespace brickyard {
 
+namespace {
+const char* non_regular_kind(const std::filesystem::file_status& st) {
+  return std::filesystem::is_directory(st)          ? "a directory"
+         : std::filesystem::is_character_file(st)   ? "a character device"
+         : std::filesystem::is_block_file(st)       ? "a block device"
+         : std::filesystem::is_fifo(st)             ? "a FIFO"
+         : std::filesystem::is_socket(st)           ? "a socket"
+                                                    : "not a regular file";
+}
+}  // namespace
+
+void check_readable_file(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::file_status st = std::filesystem::status(path, ec);
+  if (st.type() == std::filesystem::file_type::not_found)
+    throw Error(Errc::io, "cannot open: No such file or directory").with_file(path);
+  if (ec || std::filesystem::is_regular_file(st)) return;  // (permissions show when it is opened)
+  throw Error(Errc::io, fmt::format("is {}, not a file: inputs are read from regular files", non_regular_kind(st)))
+      .with_file(path);
+}
+
 void refuse_to_replace_non_regular(const std::string& path) {
   std::error_code ec;
   const std::filesystem::file_status st = std::filesystem::status(path, ec);
   if (ec || !std::filesystem::exists(st) || std::filesystem::is_regular_file(st)) return;  // absent, or a file
-  const char* what = std::filesystem::is_directory(st)           ? "a directory"
-                     : std::filesystem::is_character_file(st)    ? "a character device"
-                     : std::filesystem::is_block_file(st)        ? "a block device"
-                     : std::filesystem::is_fifo(st)              ? "a FIFO"
-                     : std::filesystem::is_socket(st)            ? "a socket"
-                                                                 : "not a regular file";
+  const char* what = non_regular_kind(st);
   throw Error(Errc::io, fmt::format("exists and is {}: outputs replace only regular files; choose a file path", what))
       .with_file(path);
 }

@@ -10,6 +10,10 @@
 
 namespace brickyard {
 
+/// @brief Refuses an input path that is missing, or is a directory, a FIFO (whose open would
+/// wait for a writer forever), a device or a socket. @throws Error(io) naming the path.
+void check_readable_file(const std::string& path);
+
 /// @brief Refuses an output path that exists and is not a regular file (a directory, a device
 /// such as /dev/null, a FIFO, a socket, or a link to one): every writer puts its bytes in a
 /// temporary file renamed over the path, which would replace such a thing with a regular file

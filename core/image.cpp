@@ -106,6 +106,7 @@ bool read_png_into(std::FILE* file, PngErrorState& state, ImageRGBA8& image) {
 }  // namespace
 
 ImageRGBA8 read_png(const std::string& path) {
+  check_readable_file(path);
   FilePtr file(std::fopen(path.c_str(), "rb"));
   if (!file) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   png_byte signature[8];

@@ -7,6 +7,8 @@
 
 #include <fmt/format.h>
 
+#include "core/atomic_file.h"
+
 namespace brickyard {
 
 std::string json_error_message(const nlohmann::json::exception& e) {
@@ -18,6 +20,7 @@ std::string json_error_message(const nlohmann::json::exception& e) {
 }
 
 nlohmann::json read_json_file(const std::string& path) {
+  check_readable_file(path);
   std::ifstream in(path);
   if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   try {

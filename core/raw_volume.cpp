@@ -92,6 +92,7 @@ Vec3<T> get_vec3(const json& j, const char* key, const std::string& path) {
 }  // namespace
 
 RawVolumeInfo read_raw_sidecar(const std::string& path) {
+  check_readable_file(path);
   std::ifstream in(path);
   if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   json j;

@@ -24,6 +24,7 @@
 #include <zlib.h>
 #endif
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/raw_volume.h"
 #include "preprocess/volume_source.h"
@@ -107,6 +108,7 @@ std::vector<double> parse_doubles(const std::string& text, const std::string& pa
 }
 
 NrrdHeader parse_header(const std::string& path) {
+  check_readable_file(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   std::string line;
@@ -235,6 +237,7 @@ class ByteStream {
  private:
   void open() {
     position_ = 0;
+    check_readable_file(file_);
     fd_ = ::open(file_.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) throw Error(Errc::io, fmt::format("cannot open data: {}", std::strerror(errno))).with_file(file_);
     if (::lseek(fd_, off_t(offset_), SEEK_SET) < 0)

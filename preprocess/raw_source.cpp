@@ -13,6 +13,7 @@
 #include <xxhash.h>
 #include <nlohmann/json.hpp>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/raw_volume.h"
 #include "fields/grid.h"
@@ -30,6 +31,7 @@ class RawSource final : public VolumeSource {
                                                       spec.dims.x, spec.dims.y, spec.dims.z))
           .with_file(path)
           .with_field("dims");
+    check_readable_file(path);
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
     struct stat st {};
@@ -40,7 +42,14 @@ class RawSource final : public VolumeSource {
     }
     size_ = uint64_t(st.st_size);
     mtime_ns_ = int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec;
-    const uint64_t expected = spec.header_bytes + *needed;
+    uint64_t expected = 0;
+    if (__builtin_add_overflow(spec.header_bytes, *needed, &expected)) {
+      ::close(fd_);
+      throw Error(Errc::invalid_argument, fmt::format("a {}-byte header and {} bytes of voxels overflow a 64-bit size",
+                                                      spec.header_bytes, *needed))
+          .with_file(path)
+          .with_field("--header-bytes");
+    }
     if (size_ != expected) {
       ::close(fd_);
       const std::string what = size_ < expected ? "truncated" : "larger than its dims say";

@@ -22,6 +22,7 @@
 
 #include <fmt/format.h>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "preprocess/mesh_data.h"
 
@@ -55,6 +56,7 @@ class Scanner {
   /// @brief Reads the whole file. hash_comments: '#' starts a comment to the end of the line
   /// (TetGen). @throws Error(io) when the file cannot be opened or read.
   explicit Scanner(const std::string& path, bool hash_comments = false) : path_(path), comments_(hash_comments) {
+    check_readable_file(path);
     std::ifstream in(path, std::ios::binary);
     if (!in) throw Error(Errc::io, "cannot open the file").with_file(path);
     in.seekg(0, std::ios::end);

@@ -86,6 +86,7 @@ struct FileStat {
 // OpenVDB reports a missing file and a file of the wrong kind with the same exception, so ask
 // the operating system first: that is what tells Errc::io from Errc::format.
 FileStat stat_input(const std::string& path) {
+  check_readable_file(path);
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   struct stat st {};

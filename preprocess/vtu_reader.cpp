@@ -25,6 +25,7 @@
 
 #include <fmt/format.h>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "preprocess/mesh_readers.h"
 
@@ -40,6 +41,7 @@ namespace fs = std::filesystem;
 bool is_space(char c) { return c == ' ' || c == '\n' || c == '\r' || c == '\t'; }
 
 std::string read_whole_file(const std::string& path) {
+  check_readable_file(path);
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) fail(Errc::io, path, fmt::format("cannot open: {}", std::strerror(errno)));
   std::string bytes;

@@ -108,7 +108,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadArgs{"size_negative", "generate sphere --size -4 --out OUT", "'-4': every dimension must be at least 1"},
         BadArgs{"size_text", "generate sphere --size abc --out OUT", "'abc' is not a size"},
         BadArgs{"size_two_dims", "generate sphere --size 12,13 --out OUT", "has 2 dimensions; give 1 or 3"},
-        BadArgs{"size_exceeds_disk", "generate sphere --size 100000 --type f32 --out OUT", "needs 3.55 PiB, but only"},
+        BadArgs{"size_exceeds_disk", "generate sphere --size 100000 --type f32 --out OUT", "needs up to 3.55 PiB of disk (the raw file), but"},
         BadArgs{"size_overflows", "generate sphere --size 10000000 --out OUT", "overflow a 64-bit byte count"},
         BadArgs{"size_missing_value", "generate sphere --out OUT --size", "--size"},
         BadArgs{"unknown_field", "generate perlin --out OUT", "unknown field 'perlin' (known fields: marschner-lobb"},
