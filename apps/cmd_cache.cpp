@@ -298,6 +298,13 @@ int run_flight(const FlightCliOptions& o) {
   c.upload_pages_per_frame = o.upload_budget;
   c.loader_threads = o.loaders;
   c.trace_path = o.trace;
+  {
+    // The L1 pool is allocated whole when the cache is made; L2 fills only as far as it is used.
+    ResourceNeeds needs;
+    needs.task = fmt::format("flight with an L1 pool of {}", format_bytes(double(c.l1_bytes)));
+    needs.memory = {c.l1_bytes, "the L1 pool, allocated up front", "a smaller --l1"};
+    check_resources(needs);
+  }
   const CameraPath path = CameraPath::load(o.path);
   FlightOptions f;
   f.lod_ratio = o.lod;

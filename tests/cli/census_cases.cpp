@@ -623,6 +623,8 @@ void add_cache_cases(std::vector<Case>& c) {
                "brickyard -q flight $TMP/fdamaged.store --path $TMP/path.json --lod 0.01", 3,
                "$TMP/fdamaged.store: key " + kFacingBrick.to_string() + ": checksum mismatch"});
 
+  c.push_back({"cache", "--l1 larger than the free memory", {}, "BRICKYARD_AVAILABLE_MEMORY=1GiB " + flight + "--l1 4GiB", 4,
+               "flight with an L1 pool of 4 GiB needs"});
   c.push_back({"cache", "--l1 below one brick", {}, flight + "--l1 1", 2, "field '--l1': the L1 budget of 1 B is smaller than one brick"});
 }
 
