@@ -790,6 +790,12 @@ void PageCache::add_queue_stats(CacheStats& s) const {
     s.dropped_requests = m.dropped;
     s.queue_length = m.pending.size();
     s.frames = m.frames_done;
+    // A buffer L2 still holds has a second owner; one only the queue holds is memory beside L2.
+    for (const auto* q : {&m.ready, &m.blocked})
+      for (const Impl::Ready& r : *q) {
+        ++s.waiting_pages;
+        if (r.data.use_count() == 1) s.waiting_bytes_beside_l2 += r.data->size();
+      }
   }
   s.deferred_uploads = m.deferred.load();
   s.latency_p50_ms = m.latency.quantile_ms(0.5);
@@ -853,6 +859,8 @@ nlohmann::json stats_json(const CacheStats& s) {
                       {"queue_length", s.queue_length},
                       {"uploads", s.uploads},
                       {"deferred_uploads", s.deferred_uploads},
+                      {"waiting_pages", s.waiting_pages},
+                      {"waiting_bytes_beside_l2", s.waiting_bytes_beside_l2},
                       {"stalls", s.stalls},
                       {"failed_keys", s.failed_keys},
                       {"latency_ms", {{"p50", s.latency_p50_ms}, {"p99", s.latency_p99_ms}}},

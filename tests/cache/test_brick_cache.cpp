@@ -230,6 +230,32 @@ TEST_F(BrickCacheTest, UploadsRespectThePerFrameBudget) {
   for (int i = 0; i < 20; ++i) EXPECT_TRUE(cache.lookup(keys[size_t(i)], 0, false).resident());
 }
 
+TEST_F(BrickCacheTest, BricksWaitingForTheUploadBudgetAreCountedAndSoAreTheBytesL2Dropped) {
+  // 20 bricks decoded, 5 uploaded a frame, L2 of 4: the 15 waiting are counted, and the 11 or
+  // more that L2 evicted while they waited are memory beside both budgets, until placed.
+  const size_t brick = store_->format().bytes();
+  CacheConfig c = small_config(64, 4, brick);
+  c.upload_pages_per_frame = 5;
+  GridCache cache_pages(*store_, c);
+  BrickCache& cache = cache_pages.bricks();
+  const auto keys = finest_keys(*store_);
+  cache.frame_begin();
+  for (int i = 0; i < 20; ++i) cache.request(keys[size_t(i)], 1.0f);
+  cache.wait_idle();
+  CacheStats s = cache.stats();
+  EXPECT_EQ(s.waiting_pages, 15u);
+  EXPECT_GE(s.waiting_bytes_beside_l2, 11 * brick);
+  EXPECT_LE(s.waiting_bytes_beside_l2, 15 * brick);
+  EXPECT_LE(s.l2.resident, 4 * brick);
+  for (int frame = 0; frame < 3; ++frame) {
+    cache.frame_end();
+    cache.frame_begin();
+  }
+  s = cache.stats();
+  EXPECT_EQ(s.waiting_pages, 0u);
+  EXPECT_EQ(s.waiting_bytes_beside_l2, 0u);
+}
+
 TEST_F(BrickCacheTest, ABrickLoadedAndWaitingForTheUploadBudgetIsNotRequestedAgain) {
   // A renderer renews its requests every frame until the bricks are resident. One that is
   // decoded and waits for a later frame's upload budget is on its way: asking for it again
