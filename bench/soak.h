@@ -14,7 +14,8 @@
 /// - tables: what the store loads whole at open (node table, octree page table, cluster table).
 /// The budget is L1 + L2 (+ tet_bvh's BVH cache budget, 1.5 x L1 by default). The fixed
 /// overhead (SoakOverhead) is stated before the first frame: the tables, the metadata of a full
-/// L1 and L2, one page per loader thread in flight, and the back end's fixed structures
+/// L1 and L2, one page per loader thread in flight (and, with an upload budget, one frame's
+/// budget of decoded pages waiting beside L2), and the back end's fixed structures
 /// (gigavoxels' node pool and per-pixel ray states). A frame passes when resident <= budget +
 /// overhead. RSS (/proc/self/statm) is the independent check: its anonymous part (what the
 /// process allocated) flat after warm-up; the file-backed part, the stores' memory maps, is
@@ -115,7 +116,7 @@ struct SoakSample {
 struct SoakOverhead {
   uint64_t tables = 0;          ///< node, octree page and cluster tables, loaded at open
   uint64_t metadata = 0;        ///< cache metadata of a full L1 and a full L2
-  uint64_t loader = 0;          ///< one page per loader thread, decoded and not yet in L2 or L1
+  uint64_t loader = 0;          ///< one page per loader thread, and one upload budget's pages, beside L2 and L1
   uint64_t backend = 0;         ///< the back end's fixed structures
   std::string backend_what;
   uint64_t total() const { return tables + metadata + loader + backend; }
@@ -232,7 +233,9 @@ inline SoakResult run_soak(const SoakOptions& o, const std::function<void(const 
     }
     res.l1_pool_bytes = s0.l1_pool_bytes;
   }
-  ov.loader = uint64_t(o.loader_threads) * max_page;
+  // One page per loader thread in flight, and with an upload budget one frame's budget of
+  // decoded pages waiting beside L2 (past it they wait only as L2's: PageCache::held_bytes).
+  ov.loader = uint64_t(o.loader_threads + o.upload_pages_per_frame) * max_page;
   ov.backend = uint64_t(session.backend().pixel_state_bytes) * uint64_t(o.size) * uint64_t(o.size);
   if (ov.backend) ov.backend_what = "per-pixel ray states";
 

@@ -148,9 +148,10 @@ struct PageCache::Impl {
   };
   struct Ready {
     PageKey key;
-    PageBuffer data;
+    PageBuffer data;  // null while only `parked` refers to it (see held_bytes)
     uint64_t requested_ns;
     uint64_t ticket;  // which load of the key this is (ready_keys)
+    std::weak_ptr<const std::vector<std::byte>> parked;  // the page as L2 holds it, while L2 does
   };
   struct alignas(64) RequestStripe {
     std::mutex mutex;
@@ -182,6 +183,12 @@ struct PageCache::Impl {
   // loads' tickets: requests for them are merged, and a loader leaves in_flight only for its
   // own load of a key.
   absl::flat_hash_map<PageKey, uint64_t> ready_keys;
+  // Bytes of ready pages the queue holds itself. Past one frame's upload budget a decoded page
+  // waits only as L2's (parked): the queue would otherwise keep every page loaded ahead of
+  // the budget alive, past L2's budget, for as long as the budget lags the requests. A parked
+  // page L2 evicted is dropped when its turn comes; a renewed request loads it again.
+  uint64_t held_bytes = 0;
+  uint64_t expired_waiting = 0;
   uint64_t next_ticket = 1;  // 0: no load queued
   absl::flat_hash_map<PageKey, std::string> failed;
   absl::flat_hash_map<PageKey, float> this_frame_requests;
@@ -341,7 +348,16 @@ void PageCache::worker_loop() {
       if (!error.empty()) m.failed.emplace(key, error);
       if (data) {
         ticket = m.next_ticket++;
-        m.ready.push_back({key, std::move(data), requested_ns, ticket});
+        Impl::Ready r{key, std::move(data), requested_ns, ticket, {}};
+        // One frame's upload budget, in bytes (none without a budget: then drains place at once).
+        const uint64_t hold_limit = std::max(config_.upload_bytes_per_frame, config_.upload_pages_per_frame * k.page_bytes);
+        if (hold_limit > 0 && m.held_bytes + r.data->size() > hold_limit && r.data.use_count() > 1) {  // L2 has it
+          r.parked = r.data;
+          r.data.reset();
+        } else {
+          m.held_bytes += r.data->size();
+        }
+        m.ready.push_back(std::move(r));
         m.ready_keys.emplace(key, ticket);
       } else {
         m.in_flight.erase(key);
@@ -401,6 +417,19 @@ void PageCache::drain_ready() {
       r = std::move(m.ready.front());
       m.ready.pop_front();
       m.ready_keys.erase(r.key);
+      if (r.data) {
+        m.held_bytes -= r.data->size();
+      } else if (!(r.data = r.parked.lock())) {
+        // Parked, and L2 has evicted it since: dropped, the budget given back.
+        ++m.expired_waiting;
+        m.in_flight.erase(r.key);
+        if (m.frame.load() == claimed_in) {
+          m.frame_uploads.fetch_sub(1);
+          m.frame_upload_bytes.fetch_sub(bytes);
+        }
+        notify_if_idle_locked();
+        continue;
+      }
       m.in_flight.insert(r.key);  // being placed (a page deferred earlier had left it)
     }
     Kind& k = *kinds_[size_t(r.key.kind)];
@@ -794,8 +823,9 @@ void PageCache::add_queue_stats(CacheStats& s) const {
     for (const auto* q : {&m.ready, &m.blocked})
       for (const Impl::Ready& r : *q) {
         ++s.waiting_pages;
-        if (r.data.use_count() == 1) s.waiting_bytes_beside_l2 += r.data->size();
+        if (r.data && r.data.use_count() == 1) s.waiting_bytes_beside_l2 += r.data->size();
       }
+    s.expired_waiting_pages = m.expired_waiting;
   }
   s.deferred_uploads = m.deferred.load();
   s.latency_p50_ms = m.latency.quantile_ms(0.5);
@@ -861,6 +891,7 @@ nlohmann::json stats_json(const CacheStats& s) {
                       {"deferred_uploads", s.deferred_uploads},
                       {"waiting_pages", s.waiting_pages},
                       {"waiting_bytes_beside_l2", s.waiting_bytes_beside_l2},
+                      {"expired_waiting_pages", s.expired_waiting_pages},
                       {"stalls", s.stalls},
                       {"failed_keys", s.failed_keys},
                       {"latency_ms", {{"p50", s.latency_p50_ms}, {"p99", s.latency_p99_ms}}},

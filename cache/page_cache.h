@@ -132,8 +132,12 @@ struct CacheStats {
   uint64_t requests = 0, merged_requests = 0, dropped_requests = 0, queue_length = 0;
   uint64_t uploads = 0, deferred_uploads = 0;
   /// Decoded pages waiting in the loader for an upload budget or an unpinned slot, and the
-  /// bytes of those L2 no longer holds (evicted meanwhile): memory beside both budgets.
+  /// bytes of those L2 no longer holds (evicted meanwhile): memory beside both budgets, at
+  /// most one frame's upload budget (past it a page waits only as L2's).
   uint64_t waiting_pages = 0, waiting_bytes_beside_l2 = 0;
+  /// Waiting pages dropped because L2 evicted them before the budget let them up (a renewed
+  /// request loads them again).
+  uint64_t expired_waiting_pages = 0;
   uint64_t stalls = 0;          ///< blocking fetches that had to wait for a load
   uint64_t failed_keys = 0;     ///< pages that failed to load (each counted once, never retried)
   double latency_p50_ms = 0, latency_p99_ms = 0;  ///< request to resident in L1
