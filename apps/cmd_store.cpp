@@ -195,6 +195,7 @@ void run_import(const ImportOptions& o) {
   b.map_growth = !o.no_map_growth;
   b.force = o.force;
   b.check_disk = !o.no_disk_check;
+  if (o.octree) b.octree = OctreeBuildOptions{};
 
   const Vec3s d = source->dims();
   std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
@@ -214,7 +215,10 @@ void run_import(const ImportOptions& o) {
                            double(r.input_bytes) / std::max<double>(1, double(r.stored_bytes)), format_duration(r.seconds),
                            format_bytes(double(r.input_bytes) / std::max(1e-9, r.seconds)));
   for (const std::string& w : r.warnings) std::cerr << fmt::format("warning: {}: {}\n", source->name(), w);
-  if (o.octree) run_build_octree(o.out, {});
+  if (o.octree) {
+    std::cout << fmt::format("wrote the octree of {} in {}\n", o.out, format_duration(r.octree_seconds));
+    print_octree_info(r.manifest);
+  }
 }
 
 // ------------------------------------------------------------------------------------- info

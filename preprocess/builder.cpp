@@ -515,7 +515,7 @@ bool exchange_directories(const std::string& a, const std::string& b, const std:
 }  // namespace
 
 StoreBuildTarget::StoreBuildTarget(const std::string& dir, const std::string& source_json, const std::string& build_json,
-                                   bool force, BuildResult& result)
+                                   bool force, BuildResult& result, bool publish_whole)
     : lock_(dir), dir_(dir), real_(resolved_store_path(dir)), path_(dir), rebuilding_(store_sibling(dir, "rebuilding")),
       replaced_(store_sibling(dir, "replaced")) {
   reclaim();
@@ -555,6 +555,17 @@ StoreBuildTarget::StoreBuildTarget(const std::string& dir, const std::string& so
       break;
     }
   }
+  if (publish_whole && !beside_) {
+    std::error_code ec;
+    const fs::path parent = fs::path(real_).has_parent_path() ? fs::path(real_).parent_path() : fs::path(".");
+    fs::create_directories(parent, ec);
+    if (ec) fail_io("cannot create the store's directory", ec, dir_);
+    // Nothing there, or an incomplete store's directory that is not a mount point of its own.
+    if (!fs::exists(fs::symlink_status(real_, ec)) || same_file_system(real_, parent.string())) {
+      beside_ = true;
+      path_ = rebuilding_;
+    }
+  }
 }
 
 StoreBuildTarget::~StoreBuildTarget() {
@@ -580,9 +591,15 @@ void StoreBuildTarget::reclaim() {
 
 void StoreBuildTarget::commit() {
   if (!beside_ || committed_) return;
+  std::error_code ec;
+  if (!fs::exists(fs::symlink_status(real_, ec))) {  // nothing there (publish_whole): it appears whole
+    fs::rename(rebuilding_, real_, ec);
+    if (ec) fail_io(fmt::format("cannot move {} into place", rebuilding_), ec, dir_);
+    committed_ = true;
+    return;
+  }
   std::string old = rebuilding_;  // where the old store is once the new one is in place
   if (!exchange_directories(rebuilding_, real_, dir_)) {
-    std::error_code ec;
     fs::rename(real_, replaced_, ec);
     if (ec) fail_io(fmt::format("cannot move the old store aside to {}", replaced_), ec, dir_);
     fs::rename(rebuilding_, real_, ec);
@@ -594,7 +611,6 @@ void StoreBuildTarget::commit() {
     old = replaced_;
   }
   committed_ = true;
-  std::error_code ec;
   fs::remove_all(old, ec);  // the new store is in place; a failure here is reclaimed next time
 }
 
@@ -649,7 +665,7 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   const std::string source_json = source.describe_json();
   const std::string build_json = build_params_json(options, source.background());
 
-  StoreBuildTarget target(dir, source_json, build_json, options.force, result);
+  StoreBuildTarget target(dir, source_json, build_json, options.force, result, options.octree.has_value());
   if (target.up_to_date()) {
     result.up_to_date = true;
     return result;
@@ -759,10 +775,17 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   result.warnings = value_range_warnings(manifest.min_value, manifest.max_value);
   store->finish(manifest, ctx.nodes);
   store.reset();  // closed before its directory is swapped into place
-  target.commit();
   manifest.complete = true;
   result.manifest = manifest;
-  result.seconds = watch.seconds();
+  result.seconds = watch.seconds();  // the bricks' time: the octree reports its own
+  if (options.octree) {
+    std::unique_ptr<Progress> octree_progress;
+    if (progress) octree_progress = std::make_unique<Progress>("build-octree", uint64_t(volume(manifest.dims)), "voxels");
+    result.octree_seconds = build_octree(target.path(), *options.octree, target.lock(), octree_progress.get()).seconds;
+    if (octree_progress) octree_progress->finish();
+    result.manifest = read_manifest(target.path());
+  }
+  target.commit();
   result.input_bytes = source.input_bytes();
   return result;
 }

@@ -17,6 +17,7 @@
 #include <utility>
 
 #include "core/resources.h"
+#include "preprocess/octree_builder.h"
 #include "storage/brick_codec.h"
 #include "storage/lmdb_env.h"
 #include "storage/manifest.h"
@@ -56,13 +57,18 @@ struct BuildOptions {
   /// Refuse to start when the free disk is below the store's worst case (estimate_build_needs);
   /// off for data known to compress well. Memory is always checked.
   bool check_disk = true;
+  /// Also build the octree volume (import --octree), before the store is put in place: the
+  /// store is built beside its path and appears there only with its octree, never as a
+  /// complete grid without the octree asked for.
+  std::optional<OctreeBuildOptions> octree;
 };
 
 struct BuildResult {
   Manifest manifest;
   bool up_to_date = false;  ///< nothing was done: the store was complete and identical
   bool rebuilt_incomplete = false;
-  double seconds = 0;
+  double seconds = 0;          ///< the bricks' build
+  double octree_seconds = 0;   ///< BuildOptions::octree's build, when asked for
   uint64_t input_bytes = 0;
   uint64_t stored_bytes = 0;
   /// What the user should know about the data though the build succeeded (value_range_warnings).
@@ -100,8 +106,10 @@ std::vector<std::string> value_range_warnings(double min_value, double max_value
 /// two renames) the complete rebuild goes into place, or else the old store goes back.
 class StoreBuildTarget {
  public:
+  /// @param publish_whole build beside the path even when nothing is there, so that the store
+  /// appears only once commit() puts it, whole, in place (for work after the bricks: an octree).
   StoreBuildTarget(const std::string& dir, const std::string& source_json, const std::string& build_json, bool force,
-                   BuildResult& result);
+                   BuildResult& result, bool publish_whole = false);
   /// @brief Removes a rebuild that commit() did not put in place; releases the lock.
   ~StoreBuildTarget();
   StoreBuildTarget(const StoreBuildTarget&) = delete;
@@ -110,6 +118,8 @@ class StoreBuildTarget {
   bool up_to_date() const { return up_to_date_; }
   /// @brief The directory to build in: `dir`, or the rebuild beside it.
   const std::string& path() const { return path_; }
+  /// @brief The store's write lock, held until this target is destroyed.
+  const StoreWriteLock& lock() const { return lock_; }
   /// @brief Puts the finished store in place; its StoreWriter must be closed. Nothing to do for
   /// a store built in place. @throws Error(io) when a rename fails (the old store is then back).
   void commit();

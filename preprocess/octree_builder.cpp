@@ -427,17 +427,27 @@ OctreeSummary build_typed(Store& store, const OctreeBuildOptions& options, Downs
   return summary;
 }
 
-}  // namespace
-
-OctreeBuildResult build_octree(const std::string& dir, const OctreeBuildOptions& options, Progress* progress) {
+void validate(const OctreeBuildOptions& options) {
   if (!(options.tolerance >= 0))
     throw Error(Errc::invalid_argument, fmt::format("tolerance {} is below zero", options.tolerance)).with_field("--tolerance");
   if (options.clamp && !(options.clamp->first < options.clamp->second))
     throw Error(Errc::invalid_argument, fmt::format("clamp range [{}, {}] is empty or inverted", options.clamp->first,
                                                     options.clamp->second))
         .with_field("--range");
-  const auto start = std::chrono::steady_clock::now();
+}
+
+}  // namespace
+
+OctreeBuildResult build_octree(const std::string& dir, const OctreeBuildOptions& options, Progress* progress) {
+  validate(options);
   const StoreWriteLock lock(dir);  // an import or another build-octree may be writing it
+  return build_octree(dir, options, lock, progress);
+}
+
+OctreeBuildResult build_octree(const std::string& dir, const OctreeBuildOptions& options, const StoreWriteLock&,
+                               Progress* progress) {
+  validate(options);
+  const auto start = std::chrono::steady_clock::now();
   Store::OpenOptions open;
   open.writable = true;
   Store store(dir, open);

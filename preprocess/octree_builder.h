@@ -18,6 +18,7 @@
 #include <utility>
 
 #include "dataset/octree.h"
+#include "storage/store_lock.h"
 
 namespace brickyard {
 
@@ -38,5 +39,10 @@ struct OctreeBuildResult {
 /// @throws Error naming the store: not a complete grid store, a tolerance below zero, an empty
 /// or inverted clamp range. A failed build leaves the grid without an octree.
 OctreeBuildResult build_octree(const std::string& dir, const OctreeBuildOptions& options, Progress* progress = nullptr);
+
+/// @brief build_octree for a writer that already holds the store's write lock (`held`: the
+/// lock of `dir`, or of the store that `dir` is being built beside).
+OctreeBuildResult build_octree(const std::string& dir, const OctreeBuildOptions& options, const StoreWriteLock& held,
+                               Progress* progress = nullptr);
 
 }  // namespace brickyard

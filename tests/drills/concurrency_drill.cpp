@@ -428,6 +428,8 @@ TEST_F(ConcurrencyDrill, AStoreOpenedWhileItIsWrittenIsAClearErrorOrWholeAndMatc
   ASSERT_EQ(rc, 0) << testing::read_file(log);
   sight(x, gyroid, nullptr, fresh);
   EXPECT_GE(fresh.whole_first, 1);
+  // Built beside its path and put there with its octree: never a grid without the octree asked for.
+  EXPECT_EQ(fresh.without_octree, 0) << fresh.describe();
   for (const std::string& m : fresh.garbage) ADD_FAILURE() << "import: " << m;
   std::printf("import: %s\n", fresh.describe().c_str());
 
@@ -438,6 +440,7 @@ TEST_F(ConcurrencyDrill, AStoreOpenedWhileItIsWrittenIsAClearErrorOrWholeAndMatc
   sight(x, gyroid, &fbm, rebuilt);
   EXPECT_GE(rebuilt.whole_second, 1);
   EXPECT_TRUE(rebuilt.errors.empty()) << "a store rebuilt with --force stays readable: " << rebuilt.describe();
+  EXPECT_EQ(rebuilt.without_octree, 0) << rebuilt.describe();
   for (const std::string& m : rebuilt.garbage) ADD_FAILURE() << "import --force: " << m;
   std::printf("import --force: %s\n", rebuilt.describe().c_str());
 
