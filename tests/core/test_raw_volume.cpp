@@ -92,6 +92,28 @@ TEST(RawSidecar, BadContentNamesTheKey) {
   expect_error_names(sidecar_with(dir, "xxh3_64", "\"xyz\""), "xxh3_64", Errc::format);
 }
 
+// Found by fuzzing (tests/fuzz/regressions/raw_sidecar/): numbers that do not fit their key's
+// type were converted with undefined behaviour, and a source parameter that is not a number
+// escaped as nlohmann's type_error.
+TEST(RawSidecar, NumbersThatDoNotFitAndWrongTypesNameTheKey) {
+  testing::TempDir dir;
+  expect_error_names(sidecar_with(dir, "dims", "[2e30, 5, 6]"), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "dims", "[4.5, 5, 6]"), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "brickyard_raw", "1e10"), "brickyard_raw", Errc::format);
+  expect_error_names(sidecar_with(dir, "bytes", "-3.5e30"), "bytes", Errc::format);
+  expect_error_names(sidecar_with(dir, "bytes", "-240"), "bytes", Errc::format);
+  expect_error_names(sidecar_with(dir, "source_params", "{\"seed\": \"seven\"}"), "source_params.seed", Errc::format);
+  expect_error_names(sidecar_with(dir, "quantization", "[0, 1]"), "quantization", Errc::format);
+  try {
+    read_raw_sidecar(sidecar_with(dir, "dims", "[2e30, 5, 6]"));
+  } catch (const Error& e) {
+    EXPECT_NE(e.message().find("expected an array, each element an integer in"), std::string::npos) << e.what();
+  }
+  // Integral numbers written as floats still read.
+  const RawVolumeInfo info = read_raw_sidecar(sidecar_with(dir, "dims", "[4.0, 5, 6e0]"));
+  EXPECT_EQ(info.dims, Vec3s(4, 5, 6));
+}
+
 TEST(RawSidecar, MalformedJsonIsAFormatError) {
   testing::TempDir dir;
   const std::string path = dir.file("bad.json");
