@@ -14,7 +14,7 @@ nlohmann::json read_json_file(const std::string& path) {
   if (!in) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   try {
     return nlohmann::json::parse(in, nullptr, true, /*ignore_comments=*/true);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range for 1e400
     throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(path);
   }
 }

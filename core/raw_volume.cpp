@@ -85,7 +85,7 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
   json j;
   try {
     j = json::parse(in);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for 1e400
     throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(path);
   }
   if (!j.is_object()) throw Error(Errc::format, "expected a JSON object").with_file(path);

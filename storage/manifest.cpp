@@ -107,7 +107,7 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
   json j;
   try {
     j = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for 1e400
     throw Error(Errc::format, fmt::format("manifest is not valid JSON: {}", e.what())).with_file(path);
   }
   if (!j.is_object()) throw Error(Errc::format, "manifest is not a JSON object").with_file(path);

@@ -270,7 +270,7 @@ Scene parse_scene(const std::string& json_text, const std::string& file) {
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(json_text, nullptr, true, /*ignore_comments=*/true);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range for 1e400
     throw Error(Errc::format, fmt::format("not valid JSON: {}", e.what())).with_file(file);
   }
   return read_scene(j, file);

@@ -126,6 +126,16 @@ TEST(RawSidecar, MalformedJsonIsAFormatError) {
     EXPECT_EQ(e.file(), path);
   }
   EXPECT_THROW(read_raw_sidecar(dir.file("absent.json")), Error);
+  // Found by fuzzing: nlohmann's out_of_range for a number beyond the double range escaped.
+  const std::string big = sidecar_with(dir, "spacing", "[1e400, 1, 1]");
+  try {
+    read_raw_sidecar(big);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::format);
+    EXPECT_EQ(e.file(), big);
+    EXPECT_NE(e.message().find("number overflow"), std::string::npos) << e.what();
+  }
 }
 
 TEST(GridBytes, RejectsEmptyAndOverflowingGrids) {

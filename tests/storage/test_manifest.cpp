@@ -63,5 +63,19 @@ TEST(Manifest, NumbersThatDoNotFitTheirKeyAreFormatErrorsNamingIt) {
   EXPECT_EQ(Manifest::from_json(edited("\"brick_size\": 16", "\"brick_size\": 16.0"), "s.store").format.brick_size, 16);
 }
 
+// Found by fuzzing: a number beyond the double range is nlohmann's out_of_range (406), not a
+// parse_error, and escaped every JSON reader.
+TEST(Manifest, ANumberBeyondTheDoubleRangeIsNotValidJson) {
+  try {
+    Manifest::from_json(edited("\"background\": 0.0", "\"background\": 1e400"), "s.store");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::format);
+    EXPECT_EQ(e.file(), "s.store");
+    EXPECT_NE(e.message().find("not valid JSON"), std::string::npos) << e.what();
+    EXPECT_NE(e.message().find("number overflow parsing '1e400'"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace brickyard
