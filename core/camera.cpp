@@ -109,7 +109,13 @@ Camera read_camera(JsonObjectReader r, double fallback_fov) {
   cam.target = r.vec3("target");
   cam.up = r.vec3("up", Vec3d(0, 0, 1));
   cam.fov_degrees = r.number("fov_degrees", fallback_fov, 1e-3, 179.0);
-  if (length(cam.target - cam.eye) == 0) throw r.error("target", "eye and target coincide");
+  const double distance = length(cam.target - cam.eye);
+  if (distance == 0) throw r.error("target", "eye and target coincide");
+  // Finite coordinates can still be too far apart for their distance to be a double: then the
+  // viewing direction would be zero and every ray degenerate.
+  if (!std::isfinite(distance)) throw r.error("target", "eye and target are too far apart (their distance overflows)");
+  // The same for up, which the basis normalises after a cross product with the unit forward.
+  if (!std::isfinite(length(cam.up))) throw r.error("up", "up is too long (its length overflows)");
   if (length(cross(cam.target - cam.eye, cam.up)) == 0) throw r.error("up", "up is parallel to the viewing direction");
   r.finish();
   return cam;
