@@ -26,6 +26,9 @@ TEST(PageCodec, RoundTripsIntoALargerPageAndZeroesTheRest) {
   std::vector<std::byte> empty_page(16, std::byte{1});
   EXPECT_EQ(decode_page(key, encode_page(key, {}), empty_page), 0u);
   EXPECT_EQ(empty_page[0], std::byte{0});
+  // Found by fuzzing: an empty record into a kind's empty page (a manifest may say 0 bytes)
+  // passed a null pointer to memset.
+  EXPECT_EQ(decode_page(key, encode_page(key, {}), std::span<std::byte>()), 0u);
 }
 
 Errc decode_error(const PageKey& key, const std::vector<std::byte>& record, size_t page_bytes, std::string* what) {
