@@ -1,7 +1,8 @@
-// Page records of every kind but bricks (storage/page_codec.h), and what a tetrahedral
-// cluster's decoded page holds (dataset/tet.h, dataset/tet_bvh.h): decode_page over untrusted
-// record bytes; then the page as tet_bvh reads it, TetClusterPage::view, the BVH the importer
-// may have stored after the tets (ClusterBvh::stored) and one built and refitted over it.
+// Page records of every kind but bricks (storage/page_codec.h), and what their decoded pages
+// hold: decode_page over untrusted record bytes; then a tetrahedral cluster's page as tet_bvh
+// reads it (dataset/tet.h, dataset/tet_bvh.h: TetClusterPage::view, the BVH the importer may
+// have stored after the tets, one built and refitted over it), or an octree page as octree_cgt
+// reads it (dataset/octree.h: OctreePage::view, for the 24^3 f32 grid of the seeds).
 //
 // Input: 4 bytes of parameters (mode, the kind's page size in 8-byte units, the leaf size),
 // then the record. In mode "page" (bit 0 of the first byte) the rest is a decoded page
@@ -11,6 +12,7 @@
 #include <cstring>
 #include <vector>
 
+#include "dataset/octree.h"
 #include "dataset/tet.h"
 #include "dataset/tet_bvh.h"
 #include "storage/page_codec.h"
@@ -40,7 +42,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     std::vector<std::byte> page(page_mode ? std::max(page_bytes, rest.size()) : page_bytes);
     const size_t used = decode_page(key, stored, page);
     if (used > page.size()) std::abort();
-    if (kind != RecordKind::tet_cluster) return;
+    if (kind == RecordKind::octree_page) {
+      static const OctreeLayout layout = OctreeLayout::make(Vec3s(24), ValueType::f32);
+      (void)OctreePage<float>::view(page, layout);
+      return;
+    }
     // The page's size as the store would give it: the kind's fixed size (whole 4-byte units).
     page.resize(page.size() / 4 * 4);
     const TetClusterPage view = TetClusterPage::view(page);
