@@ -1,5 +1,7 @@
 #include "core/raw_volume.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -141,7 +143,11 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
     char* end = nullptr;
     errno = 0;
     const unsigned long long v = std::strtoull(hex.c_str(), &end, 16);
-    if (hex.empty() || *end != '\0' || errno != 0)
+    // Hex digits only: strtoull would also take a sign ("-1" as 2^64 - 1), spaces and "0x", and
+    // stop at an embedded NUL.
+    const bool digits = !hex.empty() && hex.size() <= 16 &&
+                        std::all_of(hex.begin(), hex.end(), [](unsigned char c) { return std::isxdigit(c) != 0; });
+    if (!digits || *end != '\0' || errno != 0)
       throw Error(Errc::format, fmt::format("'{}' is not a hexadecimal checksum", hex)).with_file(path).with_field("xxh3_64");
     info.xxh3_64 = v;
   }

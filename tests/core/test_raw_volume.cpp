@@ -104,6 +104,8 @@ TEST(RawSidecar, NumbersThatDoNotFitAndWrongTypesNameTheKey) {
   expect_error_names(sidecar_with(dir, "bytes", "-240"), "bytes", Errc::format);
   expect_error_names(sidecar_with(dir, "source_params", "{\"seed\": \"seven\"}"), "source_params.seed", Errc::format);
   expect_error_names(sidecar_with(dir, "quantization", "[0, 1]"), "quantization", Errc::format);
+  for (const char* hex : {"\"-1\"", "\" ff\"", "\"0x1f\"", "\"12\\u00003\"", "\"00000000000000001\""})
+    expect_error_names(sidecar_with(dir, "xxh3_64", hex), "xxh3_64", Errc::format);
   try {
     read_raw_sidecar(sidecar_with(dir, "dims", "[2e30, 5, 6]"));
   } catch (const Error& e) {
