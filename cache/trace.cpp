@@ -232,15 +232,20 @@ Trace read_trace(const std::string& path, TraceFormat format) {
   if (!f) throw Error(Errc::io, fmt::format("cannot open: {}", std::strerror(errno))).with_file(path);
   std::error_code ec;
   const uint64_t file_size = std::filesystem::file_size(path, ec);
+  if (ec) throw Error(Errc::io, fmt::format("cannot read its size: {}", ec.message())).with_file(path);
   uint64_t count = 0;
   if (format == TraceFormat::brickyard) {
     std::byte header[16];
     if (std::fread(header, 1, 16, f.get()) != 16 || std::memcmp(header, kMagic, 8) != 0)
       throw Error(Errc::format, "not a brickyard trace (no BYTRACE1 magic)").with_file(path);
     count = get<uint64_t>(header + 8);
-    if (file_size != 16 + count * kRecordBytes)
+    // Compared by division: 16 + count * 24 wraps for a forged count (2^61 matches an empty file).
+    if (count != (file_size - 16) / kRecordBytes || (file_size - 16) % kRecordBytes != 0)
       throw Error(Errc::format, fmt::format("header says {} records ({} bytes), the file has {} bytes: truncated or corrupt",
-                                            count, 16 + count * kRecordBytes, file_size))
+                                            count, count <= (UINT64_MAX - 16) / kRecordBytes
+                                                       ? fmt::format("{}", 16 + count * kRecordBytes)
+                                                       : std::string("more than 2^64"),
+                                            file_size))
           .with_file(path);
   } else {
     if (file_size % kRecordBytes != 0)

@@ -109,11 +109,17 @@ Camera read_camera(JsonObjectReader r, double fallback_fov) {
   cam.target = r.vec3("target");
   cam.up = r.vec3("up", Vec3d(0, 0, 1));
   cam.fov_degrees = r.number("fov_degrees", fallback_fov, 1e-3, 179.0);
-  if (length(cam.target - cam.eye) == 0) throw r.error("target", "eye and target coincide");
-  // Nearly parallel is as bad as parallel: the image's up would follow rounding error.
   const Vec3d view = cam.target - cam.eye;
+  const double distance = length(view);
+  if (distance == 0) throw r.error("target", "eye and target coincide");
+  // Finite coordinates can still be too far apart for their distance to be a double: then the
+  // viewing direction would be zero and every ray degenerate.
+  if (!std::isfinite(distance)) throw r.error("target", "eye and target are too far apart (their distance overflows)");
+  // The same for up, which the basis normalises after a cross product with the unit forward.
+  if (!std::isfinite(length(cam.up))) throw r.error("up", "up is too long (its length overflows)");
   if (length(cam.up) == 0) throw r.error("up", "up is the zero vector");
-  if (length(cross(view, cam.up)) <= 1e-6 * length(view) * length(cam.up))
+  // Nearly parallel is as bad as parallel: the image's up would follow rounding error.
+  if (length(cross(view, cam.up)) <= 1e-6 * distance * length(cam.up))
     throw r.error("up", fmt::format("up ({:g}, {:g}, {:g}) points {} the viewing direction, so no way is up in the image",
                                     cam.up.x, cam.up.y, cam.up.z, dot(view, cam.up) > 0 ? "along" : "against"));
   r.finish();

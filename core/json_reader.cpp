@@ -41,6 +41,11 @@ std::string_view type_name(const nlohmann::json& j) {
 }
 }  // namespace
 
+std::string json_found(const nlohmann::json& v) {
+  if (v.is_number()) return v.dump();
+  return std::string(type_name(v));
+}
+
 JsonObjectReader::JsonObjectReader(const nlohmann::json& object, std::string file, std::string where)
     : object_(object), file_(std::move(file)), where_(std::move(where)) {
   if (!object_.is_object())
@@ -91,9 +96,9 @@ int64_t JsonObjectReader::integer(std::string_view key, int64_t fallback, int64_
   const nlohmann::json* j = get(key);
   if (!j) return fallback;
   if (!j->is_number_integer()) throw error(key, fmt::format("expected an integer, found {}", type_name(*j)));
-  const int64_t v = j->get<int64_t>();
-  if (v < lo || v > hi) throw error(key, fmt::format("{} is outside [{}, {}]", v, lo, hi));
-  return v;
+  const auto v = json_exact<int64_t>(*j);  // not 2^64 - 1 wrapped to -1
+  if (!v || *v < lo || *v > hi) throw error(key, fmt::format("{} is outside [{}, {}]", j->dump(), lo, hi));
+  return *v;
 }
 
 bool JsonObjectReader::boolean(std::string_view key, bool fallback) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -70,15 +71,15 @@ void write_raw_sidecar(const std::string& sidecar_path, const RawVolumeInfo& inf
 namespace {
 
 // Typed access that names the key in every error.
+// Exactly a T (json_exact): no wrong types, no numbers that do not fit, no infinities.
 template <typename T>
 T get_as(const json& j, const char* key, const std::string& path) {
   auto it = j.find(key);
   if (it == j.end()) throw Error(Errc::format, "missing key").with_file(path).with_field(key);
-  try {
-    return it->get<T>();
-  } catch (const json::exception&) {
-    throw Error(Errc::format, fmt::format("wrong type ({})", it->type_name())).with_file(path).with_field(key);
-  }
+  if (auto x = json_exact<T>(*it)) return *x;
+  throw Error(Errc::format, fmt::format("expected {}, found {}", json_expected<T>(), json_found(*it)))
+      .with_file(path)
+      .with_field(key);
 }
 
 template <typename T>
@@ -142,16 +143,21 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
   info.min_value = range[0];
   info.max_value = range[1];
   if (auto q = j.find("quantization"); q != j.end()) {
+    if (!q->is_object())
+      throw Error(Errc::format, fmt::format("expected {{\"lo\": LO, \"hi\": HI}}, found {}", json_found(*q)))
+          .with_file(path)
+          .with_field("quantization");
     info.quantization = {get_as<double>(*q, "lo", path), get_as<double>(*q, "hi", path)};
   }
   if (j.contains("source")) info.source = get_as<std::string>(j, "source", path);
   if (auto p = j.find("source_params"); p != j.end() && p->is_object())
     for (auto it = p->begin(); it != p->end(); ++it) {
-      if (!it.value().is_number())
-        throw Error(Errc::format, fmt::format("wrong type ({}), expected a number", it.value().type_name()))
+      const auto v = json_exact<double>(it.value());
+      if (!v)
+        throw Error(Errc::format, fmt::format("expected a finite number, found {}", json_found(it.value())))
             .with_file(path)
             .with_field("source_params." + it.key());
-      info.source_params.emplace_back(it.key(), it.value().get<double>());
+      info.source_params.emplace_back(it.key(), *v);
     }
   info.bytes = get_as<uint64_t>(j, "bytes", path);
   if (j.contains("xxh3_64")) {
@@ -159,7 +165,11 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
     char* end = nullptr;
     errno = 0;
     const unsigned long long v = std::strtoull(hex.c_str(), &end, 16);
-    if (hex.empty() || *end != '\0' || errno != 0)
+    // Hex digits only: strtoull would also take a sign ("-1" as 2^64 - 1), spaces and "0x", and
+    // stop at an embedded NUL.
+    const bool digits = !hex.empty() && hex.size() <= 16 &&
+                        std::all_of(hex.begin(), hex.end(), [](unsigned char c) { return std::isxdigit(c) != 0; });
+    if (!digits || *end != '\0' || errno != 0)
       throw Error(Errc::format, fmt::format("'{}' is not a hexadecimal checksum", hex)).with_file(path).with_field("xxh3_64");
     info.xxh3_64 = v;
   }

@@ -1,5 +1,6 @@
 #include "dataset/tet.h"
 
+#include <cstdint>
 #include <cstring>
 
 #include <fmt/format.h>
@@ -13,8 +14,14 @@ constexpr size_t kHeaderBytes = 4 * sizeof(uint32_t);
 }  // namespace
 
 size_t TetClusterPage::bytes(uint32_t vertices, uint32_t tets, uint32_t steps, uint32_t position_sets) {
-  return kHeaderBytes + size_t(vertices) * (3 * size_t(position_sets) + size_t(steps)) * sizeof(float) +
-         size_t(tets) * 4 * sizeof(uint32_t);
+  // Each factor fits easily; their product may not (2^30 vertices of 2^30 steps is 2^64 bytes,
+  // which wraps to 0): saturate, so that no page is large enough for counts that do not fit.
+  const size_t per_vertex = (3 * size_t(position_sets) + size_t(steps)) * sizeof(float);
+  size_t vertex_bytes = 0, total = 0;
+  if (__builtin_mul_overflow(size_t(vertices), per_vertex, &vertex_bytes) ||
+      __builtin_add_overflow(kHeaderBytes + size_t(tets) * 4 * sizeof(uint32_t), vertex_bytes, &total))
+    return SIZE_MAX;
+  return total;
 }
 
 std::vector<std::byte> TetClusterPage::encode(std::span<const float> positions, std::span<const float> values,

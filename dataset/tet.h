@@ -47,7 +47,8 @@ struct TetClusterPage {
   }
   const float* values_at(uint32_t step) const { return values + size_t(step) * vertex_count; }
 
-  /// @brief Bytes a page of V vertices, T tetrahedra, S steps and P position sets needs.
+  /// @brief Bytes a page of V vertices, T tetrahedra, S steps and P position sets needs
+  /// (SIZE_MAX when that does not fit in a size_t: counts read from a damaged page or table).
   static size_t bytes(uint32_t vertices, uint32_t tets, uint32_t steps = 1, uint32_t position_sets = 1);
   /// @brief Lays a cluster out as a page: `positions` P x V x 3, `values` S x V (step-major).
   static std::vector<std::byte> encode(std::span<const float> positions, std::span<const float> values,

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -107,6 +108,17 @@ std::vector<double> parse_doubles(const std::string& text, const std::string& pa
   return out;
 }
 
+int64_t parse_integer(const std::string& text, const std::string& path, const char* field) {
+  int64_t v = 0;
+  const char* end = text.data() + text.size();
+  const auto [p, ec] = std::from_chars(text.data(), end, v);
+  if (ec == std::errc::result_out_of_range)
+    throw Error(Errc::format, fmt::format("'{}' is out of range", text)).with_file(path).with_field(field);
+  if (ec != std::errc() || p != end)
+    throw Error(Errc::format, fmt::format("'{}' is not an integer", text)).with_file(path).with_field(field);
+  return v;
+}
+
 NrrdHeader parse_header(const std::string& path) {
   check_readable_file(path);
   std::ifstream in(path, std::ios::binary);
@@ -141,9 +153,17 @@ NrrdHeader parse_header(const std::string& path) {
   if (need("dimension") != "3")
     throw Error(Errc::unsupported, fmt::format("dimension {} (only 3D volumes)", need("dimension"))).with_file(path).with_field("dimension");
   const auto sizes = parse_doubles(need("sizes"), path, "sizes");
-  if (sizes.size() != 3 || std::any_of(sizes.begin(), sizes.end(), [](double s) { return !(s >= 1) || s != std::floor(s); }))
+  // Below 2^53 each (exact as doubles, and convertible); the byte count is checked below.
+  if (sizes.size() != 3 ||
+      std::any_of(sizes.begin(), sizes.end(), [](double s) { return !(s >= 1 && s <= 0x1p53) || s != std::floor(s); }))
     throw Error(Errc::format, fmt::format("'{}' is not three positive sizes", need("sizes"))).with_file(path).with_field("sizes");
   h.dims = {int64_t(sizes[0]), int64_t(sizes[1]), int64_t(sizes[2])};
+  uint64_t bytes = element_size(h.type);
+  for (int a = 0; a < 3; ++a)
+    if (__builtin_mul_overflow(bytes, uint64_t(h.dims[a]), &bytes) || bytes > uint64_t(INT64_MAX))
+      throw Error(Errc::format, fmt::format("sizes {}x{}x{} overflow a 64-bit byte count", h.dims.x, h.dims.y, h.dims.z))
+          .with_file(path)
+          .with_field("sizes");
   h.encoding = need("encoding");
   if (h.encoding == "gz") h.encoding = "gzip";
   if (h.encoding != "raw" && h.encoding != "gzip")
@@ -175,7 +195,13 @@ NrrdHeader parse_header(const std::string& path) {
     if (o.size() != 3) throw Error(Errc::format, "expected 3 coordinates").with_file(path).with_field("space origin");
     h.origin = {o[0], o[1], o[2]};
   }
-  if (auto it = fields.find("byte skip"); it != fields.end()) h.byte_skip = std::stoll(it->second);
+  if (auto it = fields.find("byte skip"); it != fields.end()) {
+    h.byte_skip = parse_integer(it->second, path, "byte skip");
+    if (h.byte_skip < -1)
+      throw Error(Errc::format, fmt::format("byte skip {} (expected -1 or a number of bytes)", h.byte_skip))
+          .with_file(path)
+          .with_field("byte skip");
+  }
   if (auto it = fields.find("data file"); it != fields.end()) h.data_file = it->second;
   if (auto it = fields.find("datafile"); it != fields.end()) h.data_file = it->second;
   if (h.data_file.empty()) {
@@ -401,6 +427,11 @@ std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path) {
     offset = file_bytes - bytes;
   } else {
     offset += uint64_t(std::max<int64_t>(0, h.byte_skip));
+    if (offset > file_bytes)
+      throw Error(Errc::format, fmt::format("the data would start at byte {}, past the end of its {}-byte file", offset,
+                                            file_bytes))
+          .with_file(path)
+          .with_field("byte skip");
   }
 
   const bool native = h.type == NrrdType::u8 || h.type == NrrdType::u16 || h.type == NrrdType::f32;

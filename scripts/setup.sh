@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages brickyard needs, only those that are missing.
 # Idempotent: when everything is present it changes nothing and asks no mirror.
+# Extra packages a script needs besides these may be given as arguments (scripts/fuzz.sh).
 set -euo pipefail
 
 packages=(
@@ -10,6 +11,7 @@ packages=(
   libtbb-dev libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libfmt-dev libxxhash-dev zlib1g-dev libexpat1-dev libabsl-dev
   gnuplot-nox
+  "$@"
 )
 
 missing=()

@@ -84,14 +84,14 @@ struct Reader {
     if (it == j.end()) throw Error(Errc::format, "missing key").with_file(path).with_field(key);
     return *it;
   }
+  /// Exactly a T (json_exact): no wrong types, no numbers that do not fit, no infinities.
   template <typename T>
   T get(const char* key) const {
     const json& v = at(key);
-    try {
-      return v.get<T>();
-    } catch (const json::exception&) {
-      throw Error(Errc::format, fmt::format("wrong type ({})", v.type_name())).with_file(path).with_field(key);
-    }
+    if (auto x = json_exact<T>(v)) return *x;
+    throw Error(Errc::format, fmt::format("expected {}, found {}", json_expected<T>(), json_found(v)))
+        .with_file(path)
+        .with_field(key);
   }
   template <typename T>
   Vec3<T> vec3(const char* key) const {
@@ -186,6 +186,10 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
   m.histogram.lo = rh.get<double>("lo");
   m.histogram.hi = rh.get<double>("hi");
   m.histogram.counts = rh.get<std::vector<uint64_t>>("counts");
+  if (!r.at("level_stats").is_array())
+    throw Error(Errc::format, fmt::format("expected an array, found {}", json_found(r.at("level_stats"))))
+        .with_file(path)
+        .with_field("level_stats");
   for (const json& s : r.at("level_stats")) {
     Reader rs{s, path};
     m.stats.push_back({rs.get<int64_t>("bricks"), rs.get<int64_t>("constant"), rs.get<int64_t>("empty"),

@@ -74,7 +74,7 @@ size_t decode_page(const PageKey& key, std::span<const std::byte> record, std::s
   const uint64_t sum = XXH3_64bits(out.data(), h.raw_size);
   if (sum != h.checksum)
     throw corrupt(key, fmt::format("checksum mismatch: stored {:016x}, decoded data {:016x}", h.checksum, sum));
-  std::memset(out.data() + h.raw_size, 0, out.size() - h.raw_size);
+  if (out.size() > h.raw_size) std::memset(out.data() + h.raw_size, 0, out.size() - h.raw_size);  // out may be empty
   return h.raw_size;
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 
@@ -62,6 +63,17 @@ void read_table_chunk(const std::optional<std::span<const std::byte>>& value, si
           .with_file(dir);
   }
   std::memcpy(out, value->data(), bytes);
+}
+
+/// Whether a constant node's value is one a store of type t holds (read_brick converts it to
+/// the type): finite, and for the integer types a whole number within their range.
+bool holds_value(ValueType t, float v) {
+  switch (t) {
+    case ValueType::u8: return v >= 0.0f && v <= 255.0f && v == std::floor(v);
+    case ValueType::u16: return v >= 0.0f && v <= 65535.0f && v == std::floor(v);
+    case ValueType::f32: return std::isfinite(v);
+  }
+  return false;
 }
 
 /// Writes the manifest's text and its checksum (in the writer's next transaction).
@@ -275,6 +287,25 @@ void Store::load_node_table() {
       const size_t n = std::min(kNodesPerChunk, records.size() - start);
       read_table_chunk(txn.get(nodes_db_, key), n * sizeof(NodeRecord), fmt::format("node table chunk {} of level {}", chunk, level),
                        dir, records.data() + start);
+    }
+    // What the builder writes, and what readers rely on: an ordered range (its bounds may be
+    // infinite: a conservative bound of values near the largest float rounds out to infinity),
+    // and a constant value of the store's type. A chunk without a checksum, or a forged one,
+    // may hold anything.
+    for (size_t i = 0; i < records.size(); ++i) {
+      const NodeRecord& r = records[i];
+      if (!(r.min <= r.max))
+        throw Error(Errc::corrupt, fmt::format("the node table gives the brick the value range [{}, {}]", r.min, r.max))
+            .with_file(dir)
+            .with_key(layout_.key_at(level, int64_t(i)).to_string());
+      if (r.is_constant() && !holds_value(manifest_.format.type, r.constant))
+        throw Error(Errc::corrupt, fmt::format("the node table gives the brick the constant value {}, which is not a {} value{}",
+                                               r.constant, to_string(manifest_.format.type),
+                                               manifest_.format.type == ValueType::u8    ? " (a whole number in [0, 255])"
+                                               : manifest_.format.type == ValueType::u16 ? " (a whole number in [0, 65535])"
+                                                                                         : " (a finite number)"))
+            .with_file(dir)
+            .with_key(layout_.key_at(level, int64_t(i)).to_string());
     }
   }
 }

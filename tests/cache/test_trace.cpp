@@ -130,6 +130,15 @@ TEST(Trace, MalformedFilesAreFormatErrors) {
   EXPECT_THROW(read_trace(dir.file("absent.bytrace")), Error);
 }
 
+// Found by fuzzing (tests/fuzz/regressions/trace_bytrace/): a record count of 2^61 makes
+// 16 + count * 24 wrap to 16, the size of a header alone, and reserve() threw a bare
+// std::length_error.
+TEST(Trace, ARecordCountThatOverflowsTheFileSizeIsAFormatError) {
+  testing::TempDir dir;
+  std::ofstream(dir.file("forged.bytrace"), std::ios::binary) << std::string("BYTRACE1\0\0\0\0\0\0\0\x20", 16);
+  expect_format_error(dir.file("forged.bytrace"), "header says 2305843009213693952 records (more than 2^64 bytes)");
+}
+
 TEST(Trace, SyntheticGeneratorsHaveTheirShape) {
   const Trace z = zipf_trace(100, 50000, 1.0, 1);
   std::map<uint64_t, int> counts;

@@ -263,7 +263,7 @@ void add_import_cases(std::vector<Case>& c) {
                "BRICKYARD_AVAILABLE_MEMORY=1GiB brickyard import field:fbm --size 8192 --type u8 --no-disk-check --out $TMP/i.store", 4,
                "of memory"});
   c.push_back({"import", "sidecar: dims of the wrong type", sidecar("sc_dims_type", [](nlohmann::json& j) { j["dims"] = "16x16x16"; }),
-               "brickyard import $TMP/sc_dims_type.raw --out $TMP/i.store", 1, "$TMP/sc_dims_type.raw.json: field 'dims': wrong type"});
+               "brickyard import $TMP/sc_dims_type.raw --out $TMP/i.store", 1, "$TMP/sc_dims_type.raw.json: field 'dims': expected an array, each element an integer, found a string"});
   c.push_back({"import", "sidecar: dims missing", sidecar("sc_no_dims", [](nlohmann::json& j) { j.erase("dims"); }),
                "brickyard import $TMP/sc_no_dims.raw --out $TMP/i.store", 1, "$TMP/sc_no_dims.raw.json: field 'dims': missing key"});
   c.push_back({"import", "sidecar: two dims", sidecar("sc_dims2", [](nlohmann::json& j) { j["dims"] = {16, 16}; }),

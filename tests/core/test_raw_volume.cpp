@@ -109,6 +109,30 @@ TEST(Spacing, OnlyPositiveFiniteDistancesPlaceAGrid) {
     EXPECT_NE(spacing_problem(s).find("positive, finite"), std::string::npos) << s.x << " " << s.y << " " << s.z;
 }
 
+// Found by fuzzing (tests/fuzz/regressions/raw_sidecar/): numbers that do not fit their key's
+// type were converted with undefined behaviour, and a source parameter that is not a number
+// escaped as nlohmann's type_error.
+TEST(RawSidecar, NumbersThatDoNotFitAndWrongTypesNameTheKey) {
+  testing::TempDir dir;
+  expect_error_names(sidecar_with(dir, "dims", "[2e30, 5, 6]"), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "dims", "[4.5, 5, 6]"), "dims", Errc::format);
+  expect_error_names(sidecar_with(dir, "brickyard_raw", "1e10"), "brickyard_raw", Errc::format);
+  expect_error_names(sidecar_with(dir, "bytes", "-3.5e30"), "bytes", Errc::format);
+  expect_error_names(sidecar_with(dir, "bytes", "-240"), "bytes", Errc::format);
+  expect_error_names(sidecar_with(dir, "source_params", "{\"seed\": \"seven\"}"), "source_params.seed", Errc::format);
+  expect_error_names(sidecar_with(dir, "quantization", "[0, 1]"), "quantization", Errc::format);
+  for (const char* hex : {"\"-1\"", "\" ff\"", "\"0x1f\"", "\"12\\u00003\"", "\"00000000000000001\""})
+    expect_error_names(sidecar_with(dir, "xxh3_64", hex), "xxh3_64", Errc::format);
+  try {
+    read_raw_sidecar(sidecar_with(dir, "dims", "[2e30, 5, 6]"));
+  } catch (const Error& e) {
+    EXPECT_NE(e.message().find("expected an array, each element an integer,"), std::string::npos) << e.what();
+  }
+  // Integral numbers written as floats still read.
+  const RawVolumeInfo info = read_raw_sidecar(sidecar_with(dir, "dims", "[4.0, 5, 6e0]"));
+  EXPECT_EQ(info.dims, Vec3s(4, 5, 6));
+}
+
 TEST(RawSidecar, MalformedJsonIsAFormatError) {
   testing::TempDir dir;
   const std::string path = dir.file("bad.json");
@@ -121,6 +145,20 @@ TEST(RawSidecar, MalformedJsonIsAFormatError) {
     EXPECT_EQ(e.file(), path);
   }
   EXPECT_THROW(read_raw_sidecar(dir.file("absent.json")), Error);
+  // Found by fuzzing: nlohmann's out_of_range for a number beyond the double range escaped.
+  const std::string big = dir.file("big.json");
+  write_raw_sidecar(big, sample_info());
+  std::string text = testing::read_file(big);
+  text.insert(text.find('{') + 1, "\"spacing\": [1e400, 1, 1], ");
+  std::ofstream(big) << text;
+  try {
+    read_raw_sidecar(big);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::format);
+    EXPECT_EQ(e.file(), big);
+    EXPECT_NE(e.message().find("number overflow"), std::string::npos) << e.what();
+  }
 }
 
 TEST(GridBytes, RejectsEmptyAndOverflowingGrids) {

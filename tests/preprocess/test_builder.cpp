@@ -14,6 +14,8 @@
 #include "core/raw_volume.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
+#include "storage/lmdb_env.h"
+#include "storage/store.h"
 #include "storage/store_lock.h"
 #include "test_util.h"
 
@@ -124,6 +126,48 @@ TEST(Builder, ConstantBricksHaveNoPayloadAndBackgroundOnesAreEmpty) {
               for (const auto& s : r.manifest.stats) c += s.constant;
               return c;
             }()));
+}
+
+// Found by fuzzing (tests/fuzz/regressions/node_table/): a node table chunk without its
+// checksum (as stores written before checksums have) was trusted whole, and read_brick converted
+// a constant of -1.7e38 to u16 with undefined behaviour. The store now refuses such a table at
+// open, naming the brick.
+TEST(Builder, AStoreWhoseNodeTableHoldsWhatNoBuildWritesIsCorrupt) {
+  testing::TempDir dir;
+  auto source = make_field_source(make_field("sphere"), {20, 20, 20}, ValueType::u16);
+  build_store(*source, dir.file("s"), small_bricks());
+  std::vector<NodeRecord> level0;
+  {
+    const Store store(dir.file("s"));
+    level0 = store.nodes().level(0);
+  }
+  auto open_with = [&](NodeRecord node) -> std::string {
+    std::vector<NodeRecord> records = level0;
+    records[0] = node;
+    {
+      lmdb::Env env(dir.file("s"), {});
+      const lmdb::Database nodes = env.open_database(kNodesDb, false);
+      lmdb::BatchWriter writer(env);
+      const std::vector<std::byte> key(8, std::byte{0});  // level 0, chunk 0, without a checksum
+      writer.put(nodes, key, lmdb::Bytes(reinterpret_cast<const std::byte*>(records.data()), records.size() * sizeof(NodeRecord)));
+      writer.commit();
+    }
+    try {
+      const Store store(dir.file("s"));
+      return "";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), Errc::corrupt) << e.what();
+      EXPECT_EQ(e.file(), dir.file("s"));
+      EXPECT_EQ(e.key(), "L0 (0, 0, 0)");
+      return e.message();
+    }
+  };
+  EXPECT_EQ(open_with(level0[0]), "");  // unchecked but sound: read as before
+  EXPECT_EQ(open_with({0, 1, -1.7e38f, kNodeConstant | kNodeHasChildren}),
+            "the node table gives the brick the constant value -1.7e+38, which is not a u16 value (a whole number in [0, 65535])");
+  EXPECT_NE(open_with({0, 1, 2.5f, kNodeConstant | kNodeHasChildren}).find("constant value 2.5"), std::string::npos);
+  EXPECT_EQ(open_with({NAN, 1, 0, kNodeHasChildren}), "the node table gives the brick the value range [nan, 1]");
+  EXPECT_EQ(open_with({2, 1, 0, kNodeHasChildren}), "the node table gives the brick the value range [2, 1]");
 }
 
 TEST(Builder, ManifestDescribesTheVolume) {

@@ -147,5 +147,25 @@ TEST(Nrrd, BadFilesAreClearErrors) {
   expect_error(dir.file("type.nrrd"), Errc::unsupported, "NRRD type 'block'");
 }
 
+// Found by fuzzing (tests/fuzz/regressions/nrrd/): numbers in the header that do not fit were
+// std::stoll's bare out_of_range, or undefined conversions and overflows.
+TEST(Nrrd, HeaderNumbersThatDoNotFitAreClearErrors) {
+  testing::TempDir dir;
+  const std::string head = "NRRD0004\ntype: uchar\ndimension: 3\nencoding: raw\n";
+  auto write = [&](const std::string& name, const std::string& fields) {
+    std::ofstream(dir.file(name), std::ios::binary) << head << fields << "\n12345678";
+    return dir.file(name);
+  };
+  expect_error(write("skip-text.nrrd", "sizes: 2 2 2\nbyte skip: ten\n"), Errc::format, "field 'byte skip': 'ten' is not an integer");
+  expect_error(write("skip-big.nrrd", "sizes: 2 2 2\nbyte skip: 99999999999999999999\n"), Errc::format,
+               "field 'byte skip': '99999999999999999999' is out of range");
+  expect_error(write("skip-neg.nrrd", "sizes: 2 2 2\nbyte skip: -2\n"), Errc::format, "byte skip -2");
+  expect_error(write("skip-far.nrrd", "sizes: 2 2 2\nbyte skip: 9223372036854775807\n"), Errc::format,
+               "field 'byte skip': the data would start at byte");
+  expect_error(write("huge.nrrd", "sizes: 1e300 1 1\n"), Errc::format, "field 'sizes'");
+  expect_error(write("overflow.nrrd", "sizes: 4000000000 4000000000 4000000000\n"), Errc::format,
+               "field 'sizes': sizes 4000000000x4000000000x4000000000 overflow a 64-bit byte count");
+}
+
 }  // namespace
 }  // namespace brickyard

@@ -1,8 +1,11 @@
 #include <gtest/gtest.h>
 
+#include <cstdint>
+#include <cstring>
 #include <numeric>
 
 #include "core/error.h"
+#include "dataset/tet.h"
 #include "storage/page_codec.h"
 
 namespace brickyard {
@@ -26,6 +29,9 @@ TEST(PageCodec, RoundTripsIntoALargerPageAndZeroesTheRest) {
   std::vector<std::byte> empty_page(16, std::byte{1});
   EXPECT_EQ(decode_page(key, encode_page(key, {}), empty_page), 0u);
   EXPECT_EQ(empty_page[0], std::byte{0});
+  // Found by fuzzing: an empty record into a kind's empty page (a manifest may say 0 bytes)
+  // passed a null pointer to memset.
+  EXPECT_EQ(decode_page(key, encode_page(key, {}), std::span<std::byte>()), 0u);
 }
 
 Errc decode_error(const PageKey& key, const std::vector<std::byte>& record, size_t page_bytes, std::string* what) {
@@ -58,6 +64,24 @@ TEST(PageCodec, EveryDamageIsACorruptErrorNamingTheKey) {
   auto newer = good;
   newer[4] = std::byte{9};  // version
   EXPECT_EQ(decode_error(key, newer, 600, &what), Errc::unsupported);
+}
+
+// Found by fuzzing (tests/fuzz/regressions/page_codec/): a page's 32-bit counts whose byte size
+// wraps 64 bits (2^30 vertices in 2^30 steps: 2^64 bytes, 0 after wrapping) fit any page, and the
+// arrays pointed far outside it.
+TEST(ClusterPage, CountsWhoseByteSizeOverflowsAreCorrupt) {
+  EXPECT_EQ(TetClusterPage::bytes(uint32_t(1) << 30, 1, uint32_t(1) << 30, uint32_t(1) << 30), SIZE_MAX);
+  EXPECT_EQ(TetClusterPage::bytes(8, 6), 16 + 8 * 4 * 4 + 6 * 16);
+  std::vector<std::byte> page(64);
+  const uint32_t header[4] = {uint32_t(1) << 30, 1, uint32_t(1) << 30, uint32_t(1) << 30};
+  std::memcpy(page.data(), header, sizeof header);
+  try {
+    TetClusterPage::view(page);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::corrupt);
+    EXPECT_NE(e.message().find("cannot hold 1073741824 vertices"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
