@@ -18,6 +18,7 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -428,6 +429,17 @@ class VdbWriter {
 
 }  // namespace
 
+namespace {
+/// OpenVDB allocates what sizes in the file say, unchecked (a damaged chunk size can ask for an
+/// exabyte), and lets std::bad_alloc escape: say which file, and that it may be damaged.
+Error out_of_memory_reading(const std::string& path, const std::string& what) {
+  Error e(Errc::resource, fmt::format("OpenVDB ran out of memory reading {}: the file is damaged, or needs more memory "
+                                      "than this machine has", what));
+  e.with_file(path);
+  return e;
+}
+}  // namespace
+
 bool vdb_support() { return true; }
 
 std::unique_ptr<VolumeSource> open_vdb_source(const std::string& path, const std::string& grid_name) {
@@ -438,6 +450,10 @@ std::unique_ptr<VolumeSource> open_vdb_source(const std::string& path, const std
   try {
     file.open(/*delayLoad=*/false);
   } catch (const vdb::Exception& e) {
+    throw Error(Errc::format, fmt::format("not a readable OpenVDB file ({})", e.what())).with_file(path);
+  } catch (const std::bad_alloc&) {
+    throw out_of_memory_reading(path, "its header");
+  } catch (const std::exception& e) {
     throw Error(Errc::format, fmt::format("not a readable OpenVDB file ({})", e.what())).with_file(path);
   }
   std::vector<std::string> names;
@@ -470,6 +486,10 @@ std::unique_ptr<VolumeSource> open_vdb_source(const std::string& path, const std
         .with_field("--grid");
   } catch (const vdb::Exception& e) {
     throw Error(Errc::format, fmt::format("cannot read grid '{}' ({})", name, e.what())).with_file(path);
+  } catch (const std::bad_alloc&) {
+    throw out_of_memory_reading(path, fmt::format("grid '{}'", name));
+  } catch (const std::exception& e) {
+    throw Error(Errc::format, fmt::format("cannot read grid '{}' ({})", name, e.what())).with_file(path);
   }
   if (!grid->isType<vdb::FloatGrid>() && !grid->isType<vdb::DoubleGrid>() && !grid->isType<vdb::Int32Grid>())
     throw Error(Errc::unsupported, fmt::format("grid '{}' holds {} values ({}); brickyard imports float, double and "
@@ -483,6 +503,10 @@ std::unique_ptr<VolumeSource> open_vdb_source(const std::string& path, const std
     grid = file.readGrid(name);
     file.close();
   } catch (const vdb::Exception& e) {
+    throw Error(Errc::format, fmt::format("cannot read grid '{}' ({})", name, e.what())).with_file(path);
+  } catch (const std::bad_alloc&) {
+    throw out_of_memory_reading(path, fmt::format("grid '{}'", name));
+  } catch (const std::exception& e) {
     throw Error(Errc::format, fmt::format("cannot read grid '{}' ({})", name, e.what())).with_file(path);
   }
   return std::make_unique<VdbSource>(path, std::move(grid), st);
