@@ -200,8 +200,7 @@ std::unique_ptr<lmdb::Env> open_existing(const std::string& dir, bool writable =
   return env;
 }
 
-Manifest load_manifest(lmdb::Env& env, const lmdb::Database& db, const std::string& dir) {
-  lmdb::ReadTxn txn(env);
+Manifest load_manifest(const lmdb::ReadTxn& txn, const lmdb::Database& db, const std::string& dir) {
   auto text = txn.get(db, lmdb::as_bytes(kManifestKey));
   if (!text) throw Error(Errc::format, "not a brickyard store (empty manifest database)").with_file(dir);
   if (auto sum = txn.get(db, lmdb::as_bytes(kManifestChecksumKey))) {
@@ -221,13 +220,27 @@ Manifest load_manifest(lmdb::Env& env, const lmdb::Database& db, const std::stri
 Manifest read_manifest(const std::string& dir) {
   auto env = open_existing(dir);
   const auto db = env->open_database(kManifestDb, false);
-  return load_manifest(*env, db, dir);
+  const lmdb::ReadTxn txn(*env);
+  return load_manifest(txn, db, dir);
 }
 
 Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
   env_ = open_existing(dir, options.writable);
   manifest_db_ = env_->open_database(kManifestDb, false);
-  manifest_ = load_manifest(*env_, manifest_db_, dir);
+  // Every database is opened first, then the manifest and the tables are read in one read
+  // transaction: a writer changing the store meanwhile (build-octree on a live store replaces
+  // the octree table and the manifest together) is seen whole or not at all, never an old
+  // manifest beside a new or missing table.
+  const auto open_if_present = [&](const char* name, lmdb::Database& db) {
+    if (env_->has_database(name)) db = env_->open_database(name, false);
+  };
+  open_if_present(kNodesDb, nodes_db_);
+  open_if_present(kBricksDb, bricks_db_);
+  open_if_present(kOctreeDb, octree_db_);
+  open_if_present(kTetClustersDb, clusters_db_);
+  open_if_present(kTetsDb, tets_db_);
+  const lmdb::ReadTxn txn(*env_);
+  manifest_ = load_manifest(txn, manifest_db_, dir);
   if (!manifest_.complete && !options.allow_incomplete)
     throw Error(Errc::format, "the store is incomplete: its build was interrupted or failed; run the import again")
         .with_file(dir);
@@ -239,7 +252,7 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
   info.time_steps = manifest_.time_steps;
   info.source = manifest_.source;
   if (manifest_.kind == DataKind::tetrahedral) {
-    load_cluster_table();
+    load_cluster_table(txn);
     info.world = manifest_.mesh.bounds;
     // A mesh's unit: the edge of a cube holding one tetrahedron's share of the box, a stand-in
     // for the mean edge length that needs no pass over the tetrahedra.
@@ -251,15 +264,14 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
                                                  step_ranges_));
     return;
   }
-  load_node_table();
+  load_node_table(txn);
   info.world = Box3d(manifest_.origin, manifest_.origin + manifest_.spacing * Vec3d(manifest_.dims - Vec3s(1)));
   info.unit_length = min_component(manifest_.spacing);
   std::optional<OctreeView> octree;
-  if (env_->has_database(kOctreeDb)) octree_db_ = env_->open_database(kOctreeDb, false);
   if (manifest_.octree) {
-    if (!env_->has_database(kOctreeDb))
+    if (octree_db_.name.empty())
       throw Error(Errc::corrupt, "the manifest records an octree volume but the store has no octree database").with_file(dir);
-    load_octree_table();
+    load_octree_table(txn);
     octree.emplace(octree_layout(), *manifest_.octree, std::span<const OctreePageRange>(octree_pages_));
   }
   dataset_ = std::make_unique<Dataset>(std::move(info),
@@ -267,19 +279,16 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
                                        std::nullopt, std::move(octree));
 }
 
-void Store::load_node_table() {
+void Store::load_node_table(const lmdb::ReadTxn& txn) {
   const std::string& dir = path_;
   layout_ = manifest_.layout();
   nodes_ = NodeTable(layout_);
-  if (!env_->has_database(kNodesDb) || !env_->has_database(kBricksDb)) {
+  if (nodes_db_.name.empty() || bricks_db_.name.empty()) {
     if (manifest_.complete) throw Error(Errc::corrupt, "complete store without node or brick database").with_file(dir);
     return;  // an incomplete store may have neither yet
   }
-  nodes_db_ = env_->open_database(kNodesDb, false);
-  bricks_db_ = env_->open_database(kBricksDb, false);
   if (!manifest_.complete) return;  // the node table is written last
 
-  lmdb::ReadTxn txn(*env_);
   for (int level = 0; level < layout_.levels; ++level) {
     auto& records = nodes_.level(level);
     for (size_t start = 0, chunk = 0; start < records.size(); start += kNodesPerChunk, ++chunk) {
@@ -310,9 +319,8 @@ void Store::load_node_table() {
   }
 }
 
-void Store::load_octree_table() {
+void Store::load_octree_table(const lmdb::ReadTxn& txn) {
   octree_pages_.resize(size_t(manifest_.octree->pages));
-  lmdb::ReadTxn txn(*env_);
   for (size_t start = 0, chunk = 0; start < octree_pages_.size(); start += kNodesPerChunk, ++chunk) {
     const size_t n = std::min(kNodesPerChunk, octree_pages_.size() - start);
     read_table_chunk(txn.get(octree_db_, big_endian_id(kOctreeTableKey | chunk)), n * sizeof(OctreePageRange),
@@ -323,17 +331,14 @@ void Store::load_octree_table() {
       throw Error(Errc::corrupt, fmt::format("octree page table is not sorted at entry {}", i)).with_file(path_);
 }
 
-void Store::load_cluster_table() {
+void Store::load_cluster_table(const lmdb::ReadTxn& txn) {
   const std::string& dir = path_;
-  if (!env_->has_database(kTetClustersDb) || !env_->has_database(kTetsDb)) {
+  if (clusters_db_.name.empty() || tets_db_.name.empty()) {
     if (manifest_.complete) throw Error(Errc::corrupt, "complete mesh store without cluster or tet database").with_file(dir);
     return;
   }
-  clusters_db_ = env_->open_database(kTetClustersDb, false);
-  tets_db_ = env_->open_database(kTetsDb, false);
   if (!manifest_.complete) return;  // the cluster table is written last
   clusters_.resize(size_t(manifest_.mesh.clusters));
-  lmdb::ReadTxn txn(*env_);
   for (size_t start = 0, chunk = 0; start < clusters_.size(); start += kNodesPerChunk, ++chunk) {
     const size_t n = std::min(kNodesPerChunk, clusters_.size() - start);
     read_table_chunk(txn.get(clusters_db_, big_endian_id(chunk)), n * sizeof(TetCluster), fmt::format("cluster table chunk {}", chunk),

@@ -114,9 +114,10 @@ class Store : public PageSource {
 
  private:
   friend class OctreeWriter;
-  void load_node_table();
-  void load_cluster_table();
-  void load_octree_table();
+  // Each reads from `txn`, the constructor's one snapshot of the store (see Store::Store).
+  void load_node_table(const lmdb::ReadTxn& txn);
+  void load_cluster_table(const lmdb::ReadTxn& txn);
+  void load_octree_table(const lmdb::ReadTxn& txn);
   PageRead read_octree_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const;
 
   std::string path_;
