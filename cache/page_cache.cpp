@@ -346,12 +346,18 @@ void PageCache::worker_loop() {
     {
       std::lock_guard lock(m.queue_mutex);
       if (!error.empty()) m.failed.emplace(key, error);
+      // One frame's upload budget, in bytes (none without a budget: then drains place at once).
+      const uint64_t hold_limit = std::max(config_.upload_bytes_per_frame, config_.upload_pages_per_frame * k.page_bytes);
+      const bool over = data && hold_limit > 0 && m.held_bytes + data->size() > hold_limit;
+      if (over && data.use_count() == 1) {
+        // Past the budget and L2 has already let it go: dropped now, as a parked page would be.
+        ++m.expired_waiting;
+        data.reset();
+      }
       if (data) {
         ticket = m.next_ticket++;
         Impl::Ready r{key, std::move(data), requested_ns, ticket, {}};
-        // One frame's upload budget, in bytes (none without a budget: then drains place at once).
-        const uint64_t hold_limit = std::max(config_.upload_bytes_per_frame, config_.upload_pages_per_frame * k.page_bytes);
-        if (hold_limit > 0 && m.held_bytes + r.data->size() > hold_limit && r.data.use_count() > 1) {  // L2 has it
+        if (over) {  // L2 holds it: it waits as L2's
           r.parked = r.data;
           r.data.reset();
         } else {
