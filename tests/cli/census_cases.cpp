@@ -25,6 +25,7 @@
 #include "storage/store.h"
 #include "storage/store_lock.h"
 #include "store_damage.h"
+#include "stops_halfway.h"
 #include "test_util.h"
 
 namespace brickyard::census {
@@ -117,27 +118,9 @@ std::vector<std::byte> bytes_of(const std::string& s) {
   return {reinterpret_cast<const std::byte*>(s.data()), reinterpret_cast<const std::byte*>(s.data() + s.size())};
 }
 
-/// A source whose reads fail halfway: the build it feeds stops, leaving an incomplete store,
-/// as a killed import does.
-class StopsHalfway final : public VolumeSource {
- public:
-  StopsHalfway() : inner_(make_field_source(make_field("sphere"), {32, 32, 32}, ValueType::u8)) {}
-  std::string name() const override { return "stops halfway"; }
-  Vec3s dims() const override { return inner_->dims(); }
-  ValueType type() const override { return inner_->type(); }
-  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
-    if (z0 >= 16) throw Error(Errc::io, "stopped halfway");
-    inner_->read_slab(z0, z1, out);
-  }
-  std::string describe_json() const override { return inner_->describe_json(); }
-
- private:
-  std::unique_ptr<VolumeSource> inner_;
-};
-
 Setup interrupted_store(const std::string& name) {
   return [=](const Workspace& ws) {
-    StopsHalfway source;
+    testing::StopsHalfway source;
     BuildOptions o;
     o.brick_size = 16;
     EXPECT_THROW(build_store(source, ws.file(name), o), Error);

@@ -26,6 +26,7 @@
 #include "storage/lmdb_env.h"
 #include "store_damage.h"
 #include "storage/store_lock.h"
+#include "stops_halfway.h"
 #include "test_util.h"
 
 extern char** environ;
@@ -314,31 +315,13 @@ TEST(CliStore, KilledImportLeavesAnIncompleteStoreAndTheRerunEqualsACleanBuild) 
   EXPECT_TRUE(testing::all_records(Store(store)) == testing::all_records(Store(dir.file("clean"))));
 }
 
-/// A source whose reads fail past its first slices: a build that dies halfway, leaving an
-/// incomplete store, as a killed import does.
-class StopsHalfway final : public VolumeSource {
- public:
-  StopsHalfway() : inner_(make_field_source(make_field("fbm"), {40, 40, 40}, ValueType::u8)) {}
-  std::string name() const override { return "stops halfway"; }
-  Vec3s dims() const override { return inner_->dims(); }
-  ValueType type() const override { return inner_->type(); }
-  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
-    if (z0 >= 20) throw Error(Errc::io, "stopped halfway");
-    inner_->read_slab(z0, z1, out);
-  }
-  std::string describe_json() const override { return inner_->describe_json(); }
-
- private:
-  std::unique_ptr<VolumeSource> inner_;
-};
-
 const char* const kBesideTheStore[] = {".s.lock", ".s.rebuilding", ".s.replaced"};
 
 TEST(CliStore, ASecondWriterIsRefusedNamingTheFirstAndItsBuildIsNotDiscarded) {
   testing::TempDir dir;
   const std::string store = dir.file("s");
   {
-    StopsHalfway source;
+    testing::StopsHalfway source("fbm", 40);
     BuildOptions o;
     o.brick_size = 16;
     EXPECT_THROW(build_store(source, store, o), Error);
