@@ -54,9 +54,12 @@ struct ImportOptions {
   std::vector<std::string> params;
   // vdb
   std::string grid;
+  // NIfTI
+  std::optional<int64_t> time_step;
   // build
   int brick_size = 32, apron = 1, hc_level = 9;
   std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size, transaction_size;
+  std::string background, convert;
   double constant_tolerance = 0;
   bool no_shuffle = false, no_map_growth = false, force = false, octree = false, no_disk_check = false;
   // meshes
@@ -70,6 +73,20 @@ bool has_extension(const std::string& path, std::initializer_list<const char*> e
   return std::any_of(exts.begin(), exts.end(), [&](const char* e) { return ext == e; });
 }
 
+/// Whether `path` names a NIfTI file: .nii or .hdr, gzip-compressed or not (extension() sees
+/// only ".gz"), or an .img with its .hdr beside it (a raw file may be called .img too).
+bool is_nifti_path(const std::string& path) {
+  std::string name = fs::path(path).filename().string();
+  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  const bool gz = name.ends_with(".gz");
+  if (gz) name.resize(name.size() - 3);
+  if (name.ends_with(".nii") || name.ends_with(".hdr")) return true;
+  if (!name.ends_with(".img")) return false;
+  const std::string stem = path.substr(0, path.size() - (gz ? 3 : 0) - 4);
+  std::error_code ec;
+  return fs::exists(stem + ".hdr", ec) || fs::exists(stem + ".HDR", ec) || fs::exists(stem + ".hdr.gz", ec);
+}
+
 std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
   if (o.source.rfind("field:", 0) == 0) {
     FieldParamValues params;
@@ -78,7 +95,16 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
     return make_field_source(make_field(o.source.substr(6), params), parse_size(o.size, "--size"), type);
   }
   if (!o.params.empty()) throw Error(Errc::invalid_argument, "--set applies to field: sources only").with_field("--set");
-  if (has_extension(o.source, {".nrrd", ".nhdr"})) return open_nrrd_source(o.source);
+  ConvertOptions convert;
+  if (!o.convert.empty()) {
+    if (o.convert != "f32")
+      throw Error(Errc::invalid_argument, fmt::format("'{}' is not a conversion brickyard makes (only f32)", o.convert))
+          .with_field("--convert");
+    convert.accept_rounding = true;
+  }
+  if (is_nifti_path(o.source)) return open_nifti_source(o.source, NiftiOptions{convert, o.time_step});
+  if (has_extension(o.source, {".nrrd", ".nhdr"})) return open_nrrd_source(o.source, convert);
+  if (has_extension(o.source, {".mhd", ".mha"})) return open_metaimage_source(o.source, convert);
   if (has_extension(o.source, {".vdb"})) return open_vdb_source(o.source, o.grid);
   if (!o.grid.empty()) throw Error(Errc::invalid_argument, "--grid applies to .vdb sources only").with_field("--grid");
 
@@ -90,7 +116,7 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
   if (have_sidecar) {
     const RawVolumeInfo info = read_raw_sidecar(sidecar);
     spec.dims = info.dims;
-    spec.type = info.type;
+    spec.type = element_type(info.type);
     spec.little_endian = info.little_endian;
     spec.spacing = info.spacing;
     spec.origin = info.origin;
@@ -114,7 +140,7 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
     spec.generator_json.clear();
   }
   if (!o.type.empty()) {
-    const ValueType t = value_type_from_string(o.type, "--type");
+    const ElementType t = element_type_from_string(o.type, "--type");
     if (t != spec.type) spec.range.reset(), spec.generator_json.clear();
     spec.type = t;
   }
@@ -128,6 +154,7 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
       throw Error(Errc::invalid_argument, problem).with_field("--spacing");
   }
   if (!o.origin.empty()) spec.origin = parse_vec3(o.origin, "--origin");
+  spec.convert = convert;
   return open_raw_source(o.source, spec);
 }
 
@@ -138,9 +165,12 @@ void refuse_options_for_other_sources(const ImportOptions& o) {
   const bool mesh_field = src.rfind("mesh:", 0) == 0, mesh_file = !mesh_field && is_mesh_source(src);
   const bool field = src.rfind("field:", 0) == 0;
   const bool nrrd = !mesh_file && has_extension(src, {".nrrd", ".nhdr"}), vdb = !mesh_file && has_extension(src, {".vdb"});
-  const bool raw = !mesh_field && !mesh_file && !field && !nrrd && !vdb;
+  const bool metaimage = !mesh_file && has_extension(src, {".mhd", ".mha"});
+  const bool nifti = !mesh_field && !mesh_file && !field && is_nifti_path(src);
+  const bool raw = !mesh_field && !mesh_file && !field && !nrrd && !metaimage && !nifti && !vdb;
   const std::string kind = mesh_field ? "a mesh:FIELD source" : mesh_file ? "a mesh file" : field ? "a field: source"
-                           : nrrd     ? "a NRRD file"          : vdb       ? "an OpenVDB file" : "a raw file";
+                           : nrrd     ? "a NRRD file"          : metaimage ? "a MetaImage file"
+                           : nifti    ? "a NIfTI file"         : vdb       ? "an OpenVDB file" : "a raw file";
   static const std::set<std::string> raw_only = {"--dims", "--endian", "--header-bytes", "--spacing", "--origin"};
   static const std::set<std::string> mesh_field_only = {"--cells", "--jitter", "--replicate", "--steps", "--move"};
   static const std::set<std::string> mesh_file_only = {"--array", "--single-step"};
@@ -150,6 +180,8 @@ void refuse_options_for_other_sources(const ImportOptions& o) {
     if (opt == "--out") continue;
     if (raw_only.count(opt)) applies = raw;
     else if (opt == "--type") applies = raw || field;
+    else if (opt == "--convert") applies = raw || nrrd || metaimage || nifti;
+    else if (opt == "--time-step") applies = nifti;
     else if (opt == "--size") applies = field;
     else if (opt == "--set") applies = field || mesh_field;
     else if (opt == "--grid") applies = vdb;
@@ -189,6 +221,8 @@ void run_import(const ImportOptions& o) {
   b.downsample = parse_downsample(o.downsample);
   b.nonfinite = parse_nonfinite(o.nonfinite);
   b.constant_tolerance = o.constant_tolerance;
+  if (o.background == "auto") b.background_auto = true;
+  else if (!o.background.empty()) b.background = parse_number(o.background, "--background");
   if (!o.range.empty()) b.clamp = parse_range(o.range, "--range");
   if (!o.map_size.empty()) b.map_size = parse_bytes(o.map_size, "--map-size");
   if (!o.transaction_size.empty()) b.batch_bytes = parse_bytes(o.transaction_size, "--transaction-size");
@@ -214,6 +248,9 @@ void run_import(const ImportOptions& o) {
                            r.manifest.levels, format_bytes(double(r.stored_bytes)), format_bytes(double(r.input_bytes)),
                            double(r.input_bytes) / std::max<double>(1, double(r.stored_bytes)), format_duration(r.seconds),
                            format_bytes(double(r.input_bytes) / std::max(1e-9, r.seconds)));
+  if (r.conversion) std::cout << fmt::format("{}: {}\n", source->name(), *r.conversion);
+  if (o.background == "auto")
+    std::cout << fmt::format("background {:g} (the median of the volume's border)\n", r.manifest.background);
   for (const std::string& w : r.warnings) std::cerr << fmt::format("warning: {}: {}\n", source->name(), w);
   if (o.octree) {
     std::cout << fmt::format("wrote the octree of {} in {}\n", o.out, format_duration(r.octree_seconds));
@@ -472,14 +509,22 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     auto o = std::make_shared<ImportOptions>();
     auto* cmd = app.add_subcommand("import", "Build a multiresolution brick store from a volume");
     cmd->add_option("SOURCE", o->source,
-                    "A raw file (described by FILE.json or --dims/--type), a .nrrd/.nhdr file, a .vdb file, "
+                    "A raw file (described by FILE.json or --dims/--type), a .nrrd/.nhdr file, a MetaImage "
+                    ".mhd/.mha file, a NIfTI .nii/.nii.gz/.hdr file, a .vdb file, "
                     "field:NAME for a procedural field; a mesh (.vtu .pvd .vtk .msh .node/.ele), or mesh:FIELD "
                     "for a procedural tetrahedral mesh")
         ->required();
     cmd->add_option("-o,--out", o->out, "Store directory")->required();
     auto* raw = "Raw input";
     cmd->add_option("--dims", o->dims, "Raw: NX,NY,NZ (or N)")->group(raw);
-    cmd->add_option("-t,--type", o->type, "Raw or field: u8, u16 or f32")->group(raw);
+    cmd->add_option("-t,--type", o->type,
+                    "Raw or field: u8, i8, u16, i16 or f32 (stored as they are); raw also u32, i32 or f64 (stored "
+                    "as f32: integers beyond 2^24 need --convert f32, doubles report their rounding)")
+        ->group(raw);
+    cmd->add_option("--convert", o->convert,
+                    "Raw, NRRD, MetaImage or NIfTI: f32 accepts the rounding of 32-bit integers beyond 2^24 (the "
+                    "worst error is reported)")
+        ->group(raw);
     cmd->add_option("--endian", o->endian, "Raw: little or big")->capture_default_str()->group(raw);
     cmd->add_option("--header-bytes", o->header_bytes, "Raw: bytes to skip before the data")->group(raw);
     cmd->add_option("--spacing", o->spacing, "Raw: SX,SY,SZ")->group(raw);
@@ -488,6 +533,10 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("-s,--size", o->size, "Field: grid size N or NX,NY,NZ")->capture_default_str()->group(field);
     cmd->add_option("--set", o->params, "Field: parameter NAME=VALUE (repeatable)")->group(field);
     cmd->add_option("--grid", o->grid, "OpenVDB: grid name (default: the only grid)")->group("OpenVDB input");
+    cmd->add_option("--time-step", o->time_step,
+                    "NIfTI: which volume of a 4D file to import (0-based; a 4D file needs it, a store holds one "
+                    "volume)")
+        ->group("NIfTI input");
     auto* mesh = "Mesh input";
     cmd->add_option("--array", o->mesh.array,
                     "Mesh: the point array to import, or the name of a series NAME_0, NAME_1 ... (time steps); "
@@ -521,6 +570,10 @@ void add_store_commands(CLI::App& app, int& exit_status) {
         ->capture_default_str()->group(build);
     cmd->add_option("--constant-tolerance", o->constant_tolerance, "Store a brick as constant when max - min <= this")
         ->capture_default_str()->group(build);
+    cmd->add_option("--background", o->background,
+                    "The value of empty space, or auto (the median of the volume's border: CT air, MRI outside the "
+                    "head); constant bricks within --constant-tolerance of it are empty (default: 0, or a VDB's own)")
+        ->group(build);
     cmd->add_option("--range", o->range, "Clamp values into LO,HI (stored units) before building")->group(build);
     cmd->add_option("--nonfinite", o->nonfinite, "NaN/Inf voxels: reject, zero, or clamp (to the finite range)")
         ->capture_default_str()->group(build);

@@ -54,6 +54,12 @@ std::vector<double> parse_numbers(std::string_view text, std::string_view option
 }
 }  // namespace
 
+double parse_number(std::string_view text, std::string_view option) {
+  const auto v = parse_numbers(text, option, "a number");
+  if (v.size() != 1) throw Error(Errc::invalid_argument, fmt::format("'{}' is not a number", text)).with_field(option);
+  return v[0];
+}
+
 Vec3d parse_vec3(std::string_view text, std::string_view option) {
   const auto v = parse_numbers(text, option, "X,Y,Z");
   if (v.size() != 3) throw Error(Errc::invalid_argument, fmt::format("'{}' is not X,Y,Z", text)).with_field(option);

@@ -17,6 +17,8 @@ namespace brickyard::cli {
 Vec3s parse_size(std::string_view text, std::string_view option);
 /// @brief "X,Y,Z" finite numbers.
 Vec3d parse_vec3(std::string_view text, std::string_view option);
+/// @brief One finite number; throws Error naming the option otherwise.
+double parse_number(std::string_view text, std::string_view option);
 /// @brief "LO,HI" finite numbers with LO <= HI.
 std::pair<double, double> parse_range(std::string_view text, std::string_view option);
 /// @brief "a,b,,c" -> {"a", "b", "", "c"}: every item between separators, empty ones kept.

@@ -61,7 +61,7 @@ void BM_Import(benchmark::State& state, const std::string& field, ValueType type
   const RawVolumeInfo info = read_raw_sidecar(raw_sidecar_path(raw));
   RawFileSpec spec;
   spec.dims = info.dims;
-  spec.type = info.type;
+  spec.type = element_type(info.type);
   spec.range = ValueRange{info.min_value, info.max_value};
   {  // warm the page cache: the figure is import work, not disk speed
     std::ifstream in(raw, std::ios::binary);

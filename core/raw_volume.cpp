@@ -125,7 +125,7 @@ RawVolumeInfo read_raw_sidecar(const std::string& path) {
   const auto type_name = get_as<std::string>(j, "type", path);
   const auto type = parse_value_type(type_name);
   if (!type)
-    throw Error(Errc::format, fmt::format("unknown value type '{}' (expected u8, u16 or f32)", type_name))
+    throw Error(Errc::format, fmt::format("unknown value type '{}' (expected u8, i8, u16, i16 or f32)", type_name))
         .with_file(path)
         .with_field("type");
   info.type = *type;

@@ -105,6 +105,8 @@ OctreePage<T> OctreePage<T>::view(std::span<const std::byte> bytes, const Octree
 }
 
 template struct OctreePage<uint8_t>;
+template struct OctreePage<int8_t>;
+template struct OctreePage<int16_t>;
 template struct OctreePage<uint16_t>;
 template struct OctreePage<float>;
 

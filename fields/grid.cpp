@@ -23,7 +23,7 @@ namespace brickyard {
 
 double dequantize(double stored, ValueType type, const ValueRange& r) {
   if (!is_integer(type)) return stored;
-  return r.lo + stored / integer_max(type) * (r.hi - r.lo);
+  return r.lo + (stored - integer_min(type)) / (integer_max(type) - integer_min(type)) * (r.hi - r.lo);
 }
 
 GridSampler::GridSampler(const Field& field, const Vec3s& dims, ValueType type)

@@ -24,18 +24,19 @@ namespace brickyard {
 
 class Progress;
 
-/// @brief Maps a real value to the stored type: u8/u16 scale [r.lo, r.hi] onto [0, max] with
-/// round-to-nearest and clamping; f32 converts.
+/// @brief Maps a real value to the stored type: the integer types scale [r.lo, r.hi] onto
+/// [integer_min, integer_max] with round-to-nearest and clamping; f32 converts.
 template <typename T>
 inline T quantize(double v, const ValueRange& r) {
   if constexpr (std::is_same_v<T, float>) {
     return static_cast<float>(v);
   } else {
-    constexpr double top = std::is_same_v<T, uint8_t> ? 255.0 : 65535.0;
+    constexpr double top = integer_max(ValueTypeOf<T>::value) - integer_min(ValueTypeOf<T>::value);
     double s = (v - r.lo) / (r.hi - r.lo) * top;
-    s = s > 0.0 ? s : 0.0;  // also maps NaN to 0
+    s = s > 0.0 ? s : 0.0;  // also maps NaN to the bottom
     s = s < top ? s : top;  // branch-free min/max, so row loops vectorise
-    return static_cast<T>(s + 0.5);
+    // Rounded while still non-negative, then shifted: the same rounding for signed types.
+    return static_cast<T>(int32_t(s + 0.5) + int32_t(integer_min(ValueTypeOf<T>::value)));
   }
 }
 

@@ -18,7 +18,9 @@ namespace brickyard {
 template <typename T>
 T round_to(double v) {
   if constexpr (std::is_same_v<T, float>) return static_cast<float>(v);
-  else return static_cast<T>(std::clamp(std::lround(v), 0L, long(std::numeric_limits<T>::max())));
+  else
+    return static_cast<T>(
+        std::clamp(std::lround(v), long(std::numeric_limits<T>::lowest()), long(std::numeric_limits<T>::max())));
 }
 
 /// @brief One coarser voxel from 8 (index dx + 2 dy + 4 dz): their average (floats summed in
@@ -30,7 +32,7 @@ T filter_8(const T (&v)[8], Downsample mode) {
   if constexpr (std::is_same_v<T, float>) {
     return ((v[0] + v[1]) + (v[2] + v[3]) + (v[4] + v[5]) + (v[6] + v[7])) * 0.125f;
   } else {
-    uint32_t sum = 4;  // round half up
+    int32_t sum = 4;  // round half up (an arithmetic shift floors negative sums too)
     for (T x : v) sum += x;
     return static_cast<T>(sum >> 3);
   }

@@ -28,6 +28,7 @@
 #include "core/parallel.h"
 #include "core/progress.h"
 #include "core/timing.h"
+#include "preprocess/background.h"
 #include "preprocess/box_filter.h"
 #include "preprocess/volume_source.h"
 #include "storage/store.h"
@@ -157,8 +158,11 @@ struct BuildContext {
   Downsample downsample = Downsample::average;
   double tolerance = 0;
   double background = 0;
+  /// With a background given: the tolerance flattens only bricks within it of the background.
+  bool flatten_background_only = false;
   RecordWriter* writer = nullptr;
-  // Finest-level histogram: exact per integer value for u8/u16, 256 bins over `hist_range` for f32.
+  // Finest-level histogram: exact per integer value for the integer types (bin 0 is
+  // integer_min), 256 bins over `hist_range` for f32.
   ValueRange hist_range;
   size_t hist_bins = 256;
   tbb::enumerable_thread_specific<std::vector<uint64_t>> histograms;
@@ -303,12 +307,26 @@ class Level {
     node.max = float(nmax);
     node.flags = level_ == ctx_.layout.finest() ? kNodeFinest : kNodeHasChildren;
     auto& stats = ctx_.stats[size_t(level_)];
-    if (double(pmax) - double(pmin) <= ctx_.tolerance) {
-      const T value = ctx_.tolerance == 0 ? pmin : round_to<T>((double(pmin) + double(pmax)) / 2);
-      node.constant = float(value);
+    std::optional<T> constant;
+    bool empty = false;
+    const double lo = double(pmin), hi = double(pmax), bg = ctx_.background, tol = ctx_.tolerance;
+    if (hi - lo == 0) {  // not for infinities (inf - inf is NaN): an overflowed average stays data
+      constant = pmin;
+      empty = std::abs(lo - bg) <= tol;
+    } else if (ctx_.flatten_background_only) {
+      // Noise around the background (CT air, padding) becomes empty space; data stays exact.
+      if (std::max(std::abs(hi - bg), std::abs(lo - bg)) <= tol) constant = round_to<T>(bg), empty = true;
+    } else if (hi - lo <= tol) {
+      constant = round_to<T>((lo + hi) / 2);
+      empty = std::abs(double(*constant) - bg) <= tol;
+    }
+    if (constant) {
+      // The range stays the data's (conservative for the neighbours' cells) and covers the value.
+      node.constant = float(*constant);
+      node.min = std::min(node.min, node.constant), node.max = std::max(node.max, node.constant);
       node.flags |= kNodeConstant;
       stats.constant.fetch_add(1, std::memory_order_relaxed);
-      if (std::abs(double(value) - ctx_.background) <= ctx_.tolerance) {
+      if (empty) {
         node.flags |= kNodeEmpty;
         stats.empty.fetch_add(1, std::memory_order_relaxed);
       }
@@ -336,7 +354,7 @@ class Level {
             const double b = (double(row[lx]) - lo) * scale;
             h[size_t(std::clamp(b, 0.0, double(ctx_.hist_bins - 1)))]++;
           } else {
-            h[row[lx]]++;
+            h[size_t(int32_t(row[lx]) - int32_t(integer_min(ValueTypeOf<T>::value)))]++;
           }
         }
       }
@@ -427,7 +445,10 @@ void repair_slice(T* data, int64_t n, const BuildOptions& o, const ScanResult& s
   }
 }
 
-std::string build_params_json(const BuildOptions& o, double background) {
+/// The build's parameters, the store's identity beside its source: an automatic background is
+/// recorded as "auto" (what it found is the manifest's background), so that an identical
+/// import is known to be up to date before the source is read.
+std::string build_params_json(const BuildOptions& o, double source_background) {
   nlohmann::json j = {{"brick_size", o.brick_size},
                       {"apron", o.apron},
                       {"codec", std::string(to_string(o.codec))},
@@ -436,8 +457,11 @@ std::string build_params_json(const BuildOptions& o, double background) {
                       {"downsample", std::string(to_string(o.downsample))},
                       {"constant_tolerance", o.constant_tolerance},
                       {"nonfinite", std::string(to_string(o.nonfinite))},
-                      {"background", background}};
+                      {"background", o.background_auto ? nlohmann::json("auto")
+                                                       : nlohmann::json(o.background.value_or(source_background))}};
   j["clamp"] = o.clamp ? nlohmann::json{o.clamp->first, o.clamp->second} : nlohmann::json(nullptr);
+  // Recorded only when it applies, so that stores built before it stay up to date.
+  if (o.background || o.background_auto) j["flatten"] = "background";
   return j.dump();
 }
 
@@ -468,6 +492,9 @@ void validate(const BuildOptions& o) {
     throw Error(Errc::invalid_argument, fmt::format("LZ4-HC level {} is outside [1, 12]", o.hc_level)).with_field("--hc-level");
   if (!(o.constant_tolerance >= 0))
     throw Error(Errc::invalid_argument, "the constant tolerance must be at least 0").with_field("--constant-tolerance");
+  if (o.background && !std::isfinite(*o.background))
+    throw Error(Errc::invalid_argument, fmt::format("background {} is not a finite number", *o.background))
+        .with_field("--background");
   if (o.clamp && !(o.clamp->first <= o.clamp->second))
     throw Error(Errc::invalid_argument, fmt::format("range [{}, {}] is empty", o.clamp->first, o.clamp->second))
         .with_field("--range");
@@ -634,7 +661,7 @@ ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const Buil
   const double nodes = bricks * double(sizeof(NodeRecord));
   const double stored = bricks * record_on_disk;
   const double queues = std::min(double(uint64_t(64) << 20) + double(o.batch_bytes), stored);
-  const double histogram = (type == ValueType::u16 ? 65536.0 : 256.0) * 8;
+  const double histogram = double(std::max<size_t>(256, integer_count(type))) * 8;
   const double per_thread = G * G * G * T + 2 * payload + histogram;
   const double build = rings + row + nodes + queues + std::max(1, threads) * per_thread;
   const double slice = double(dims.x) * double(dims.y) * 4;
@@ -699,13 +726,16 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
     range = ValueRange{scan.min, scan.max};
   }
 
+  double background = options.background.value_or(source.background());
+  if (options.background_auto) background = estimate_background(source);
+
   Manifest manifest;
   manifest.dims = layout.dims;
   manifest.spacing = source.spacing();
   manifest.origin = source.origin();
   manifest.format = format;
   manifest.levels = layout.levels;
-  manifest.background = source.background();
+  manifest.background = background;
   manifest.source = nlohmann::json::parse(source_json).dump();
   manifest.build = build_json;
 
@@ -715,15 +745,16 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   ctx.nodes = NodeTable(layout);
   ctx.downsample = options.downsample;
   ctx.tolerance = options.constant_tolerance;
-  ctx.background = source.background();
+  ctx.background = background;
+  ctx.flatten_background_only = options.background.has_value() || options.background_auto;
   if (format.type == ValueType::f32) {
     ValueRange r = range.value_or(ValueRange{0, 1});
     if (options.clamp) r = {std::max(r.lo, options.clamp->first), std::min(r.hi, options.clamp->second)};
     ctx.hist_range = r;
     ctx.hist_bins = 256;
   } else {
-    ctx.hist_range = {0, integer_max(format.type)};
-    ctx.hist_bins = size_t(integer_max(format.type)) + 1;
+    ctx.hist_range = {integer_min(format.type), integer_max(format.type)};
+    ctx.hist_bins = integer_count(format.type);
   }
 
   lmdb::EnvOptions env;
@@ -764,7 +795,8 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
     const double span = std::max(1.0, manifest.max_value - manifest.min_value + 1);
     for (size_t v = 0; v < fine.size(); ++v)
       if (fine[v])
-        manifest.histogram.counts[size_t(std::min(255.0, (double(v) - manifest.min_value) / span * 256))] += fine[v];
+        manifest.histogram.counts[size_t(std::clamp(
+            (double(v) + integer_min(format.type) - manifest.min_value) / span * 256, 0.0, 255.0))] += fine[v];
   }
   for (int l = 0; l < layout.levels; ++l) {
     const auto& s = ctx.stats[size_t(l)];
@@ -773,6 +805,7 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
     result.stored_bytes += s.stored_bytes.load();
   }
   result.warnings = value_range_warnings(manifest.min_value, manifest.max_value);
+  if (const auto c = source.conversion()) result.conversion = c->summary();
   store->finish(manifest, ctx.nodes);
   store.reset();  // closed before its directory is swapped into place
   manifest.complete = true;

@@ -42,9 +42,16 @@ struct BuildOptions {
   int hc_level = 9;
   bool shuffle = true;
   Downsample downsample = Downsample::average;
-  /// A brick is constant (stored without payload) when max - min over its voxels, apron
-  /// included, is at most this.
+  /// Without a background given, a brick is constant (stored without payload, at the middle of
+  /// its range) when max - min over its voxels, apron included, is at most this; with one, only
+  /// a brick whose every voxel lies within this of the background is, at the background (empty),
+  /// and every other brick stays exact.
   double constant_tolerance = 0.0;
+  /// The value of empty space (stored units): constant bricks within constant_tolerance of it
+  /// are flagged empty. Unset: the source's (0, or OpenVDB's background).
+  std::optional<double> background;
+  /// Take the background from the volume's border (estimate_background) instead.
+  bool background_auto = false;
   /// Clamp every source value into [lo, hi] (stored units).
   std::optional<std::pair<double, double>> clamp;
   NonFinite nonfinite = NonFinite::reject;
@@ -73,6 +80,8 @@ struct BuildResult {
   uint64_t stored_bytes = 0;
   /// What the user should know about the data though the build succeeded (value_range_warnings).
   std::vector<std::string> warnings;
+  /// What converting the source's elements did (u32, i32, f64 files), when they were converted.
+  std::optional<std::string> conversion;
 };
 
 /// @brief Warnings for a value range single precision handles badly: values within a factor of

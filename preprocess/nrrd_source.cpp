@@ -50,6 +50,20 @@ struct NrrdHeader {
   int64_t byte_skip = 0;
 };
 
+ElementType element_of(NrrdType t) {
+  switch (t) {
+    case NrrdType::i8: return ElementType::i8;
+    case NrrdType::u8: return ElementType::u8;
+    case NrrdType::i16: return ElementType::i16;
+    case NrrdType::u16: return ElementType::u16;
+    case NrrdType::i32: return ElementType::i32;
+    case NrrdType::u32: return ElementType::u32;
+    case NrrdType::f32: return ElementType::f32;
+    case NrrdType::f64: return ElementType::f64;
+  }
+  return ElementType::u8;
+}
+
 size_t element_size(NrrdType t) {
   switch (t) {
     case NrrdType::i8: case NrrdType::u8: return 1;
@@ -314,20 +328,32 @@ class ByteStream {
 /// Streams and converts: gzip data, or element types brickyard does not store natively.
 class NrrdStreamSource final : public VolumeSource {
  public:
-  NrrdStreamSource(const std::string& path, const NrrdHeader& h, uint64_t data_offset)
-      : path_(path), h_(h), stream_(h.data_file.empty() ? path : h.data_file, data_offset, h.encoding == "gzip", path) {
-    switch (h.type) {
-      case NrrdType::u8: type_ = ValueType::u8; break;
-      case NrrdType::u16: type_ = ValueType::u16; break;
-      default: type_ = ValueType::f32; break;
-    }
+  NrrdStreamSource(const std::string& path, const NrrdHeader& h, uint64_t data_offset, const ConvertOptions& convert)
+      : path_(path), h_(h), stream_(h.data_file.empty() ? path : h.data_file, data_offset, h.encoding == "gzip", path),
+        element_(element_of(h.type)), type_(stored_type(element_)) {
+    if (is_native(element_)) return;
+    // One pass before the build: a conversion that would change values is refused first.
+    conversion_ = scan_conversion(h_.dims, element_, [&](int64_t, int64_t, std::span<std::byte> out) {
+      stream_.read(out.data(), out.size());
+      if (!h_.little_endian) swap_element_bytes(out, size_of(element_));
+    });
+    check_conversion(*conversion_, convert, path_);
+    stream_.restart();
   }
   std::string name() const override { return path_; }
   Vec3s dims() const override { return h_.dims; }
   ValueType type() const override { return type_; }
   Vec3d spacing() const override { return h_.spacing; }
   Vec3d origin() const override { return h_.origin; }
-  bool may_contain_nonfinite() const override { return h_.type == NrrdType::f32 || h_.type == NrrdType::f64; }
+  bool may_contain_nonfinite() const override {
+    return conversion_ ? conversion_->nonfinite > 0 : element_ == ElementType::f32;
+  }
+  std::optional<ValueRange> value_range_hint() const override {
+    if (conversion_ && conversion_->min <= conversion_->max) return ValueRange{conversion_->min, conversion_->max};
+    return std::nullopt;
+  }
+  std::optional<ConversionReport> conversion() const override { return conversion_; }
+  bool can_skip() const override { return false; }
   void rewind() override {
     stream_.restart();
     next_z_ = 0;
@@ -339,35 +365,16 @@ class NrrdStreamSource final : public VolumeSource {
     const size_t es = element_size(h_.type);
     buffer_.resize(n * es);
     stream_.read(buffer_.data(), buffer_.size());
-    if (!h_.little_endian && es > 1)
-      for (size_t i = 0; i < n; ++i) std::reverse(buffer_.begin() + long(i * es), buffer_.begin() + long((i + 1) * es));
-    if (type_ != ValueType::f32 || h_.type == NrrdType::f32) {
-      std::memcpy(out.data(), buffer_.data(), out.size());
-      return;
-    }
-    float* dst = reinterpret_cast<float*>(out.data());
-    auto convert = [&](auto tag) {
-      using S = decltype(tag);
-      for (size_t i = 0; i < n; ++i) {
-        S v;
-        std::memcpy(&v, buffer_.data() + i * sizeof(S), sizeof(S));
-        dst[i] = static_cast<float>(v);
-      }
-    };
-    switch (h_.type) {
-      case NrrdType::i8: convert(int8_t{}); break;
-      case NrrdType::i16: convert(int16_t{}); break;
-      case NrrdType::i32: convert(int32_t{}); break;
-      case NrrdType::u32: convert(uint32_t{}); break;
-      case NrrdType::f64: convert(double{}); break;
-      default: break;
-    }
+    if (!h_.little_endian) swap_element_bytes(buffer_, es);
+    BY_CHECK_EQ(out.size(), n * size_of(type_));
+    convert_elements(buffer_.data(), element_, n, out.data());
   }
   std::string describe_json() const override {
     std::error_code ec;
     const std::string data = h_.data_file.empty() ? path_ : h_.data_file;
     nlohmann::json j = {{"kind", "nrrd"}, {"path", path_}, {"encoding", h_.encoding},
                         {"bytes", uint64_t(fs::file_size(data, ec))}};
+    if (conversion_) j["conversion"] = nlohmann::json::parse(conversion_->to_json());
     return j.dump();
   }
   uint64_t input_bytes() const override { return uint64_t(volume(h_.dims)) * element_size(h_.type); }
@@ -376,7 +383,9 @@ class NrrdStreamSource final : public VolumeSource {
   std::string path_;
   NrrdHeader h_;
   ByteStream stream_;
-  ValueType type_ = ValueType::f32;
+  ElementType element_;
+  ValueType type_;
+  std::optional<ConversionReport> conversion_;
   std::vector<std::byte> buffer_;
   int64_t next_z_ = 0;
 };
@@ -390,8 +399,12 @@ class NrrdRawSource final : public VolumeSource {
   ValueType type() const override { return raw_->type(); }
   Vec3d spacing() const override { return raw_->spacing(); }
   Vec3d origin() const override { return raw_->origin(); }
+  bool may_contain_nonfinite() const override { return raw_->may_contain_nonfinite(); }
+  std::optional<ValueRange> value_range_hint() const override { return raw_->value_range_hint(); }
+  std::optional<ConversionReport> conversion() const override { return raw_->conversion(); }
   void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override { raw_->read_slab(z0, z1, out); }
   void rewind() override { raw_->rewind(); }
+  bool can_skip() const override { return raw_->can_skip(); }
   uint64_t input_bytes() const override { return raw_->input_bytes(); }
   std::string describe_json() const override {
     auto j = nlohmann::json::parse(raw_->describe_json());
@@ -408,7 +421,7 @@ class NrrdRawSource final : public VolumeSource {
 
 }  // namespace
 
-std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path) {
+std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path, const ConvertOptions& convert) {
   const NrrdHeader h = parse_header(path);
   const std::string data = h.data_file.empty() ? path : h.data_file;
   const uint64_t elements = uint64_t(volume(h.dims));
@@ -434,8 +447,7 @@ std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path) {
           .with_field("byte skip");
   }
 
-  const bool native = h.type == NrrdType::u8 || h.type == NrrdType::u16 || h.type == NrrdType::f32;
-  if (h.encoding == "raw" && native) {
+  if (h.encoding == "raw") {
     if (file_bytes != offset + bytes)
       throw Error(Errc::format, fmt::format("data is {}: {} bytes after the header, but {}x{}x{} needs {}",
                                             file_bytes < offset + bytes ? "truncated" : "longer than the sizes say",
@@ -444,7 +456,8 @@ std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path) {
           .with_field("sizes");
     RawFileSpec spec;
     spec.dims = h.dims;
-    spec.type = h.type == NrrdType::u8 ? ValueType::u8 : (h.type == NrrdType::u16 ? ValueType::u16 : ValueType::f32);
+    spec.type = element_of(h.type);
+    spec.convert = convert;
     spec.little_endian = h.little_endian;
     spec.header_bytes = offset;
     spec.spacing = h.spacing;
@@ -456,7 +469,7 @@ std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path) {
                                           file_bytes - std::min(file_bytes, offset), h.dims.x, h.dims.y, h.dims.z, bytes))
         .with_file(path)
         .with_field("sizes");
-  return std::make_unique<NrrdStreamSource>(path, h, offset);
+  return std::make_unique<NrrdStreamSource>(path, h, offset, convert);
 }
 
 }  // namespace brickyard

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <vector>
 
 #include <fmt/format.h>
 #include <xxhash.h>
@@ -25,7 +26,8 @@ namespace {
 class RawSource final : public VolumeSource {
  public:
   RawSource(const std::string& path, const RawFileSpec& spec) : path_(path), spec_(spec) {
-    const auto needed = checked_grid_bytes(spec.dims, spec.type);
+    auto needed = checked_grid_bytes(spec.dims, ValueType::u8);  // the voxel count, then bytes
+    if (needed && __builtin_mul_overflow(*needed, uint64_t(size_of(spec.type)), &*needed)) needed.reset();
     if (!needed)
       throw Error(Errc::invalid_argument, fmt::format("dims {}x{}x{} are empty or overflow a 64-bit byte count",
                                                       spec.dims.x, spec.dims.y, spec.dims.z))
@@ -69,6 +71,7 @@ class RawSource final : public VolumeSource {
     ::madvise(map, size_, MADV_SEQUENTIAL);
     map_ = static_cast<const std::byte*>(map);
     if (spec.xxh3_64) check_checksum(*spec.xxh3_64);
+    if (!is_native(spec.type)) measure_conversion();
   }
   ~RawSource() override {
     ::munmap(const_cast<std::byte*>(map_), size_);
@@ -77,23 +80,39 @@ class RawSource final : public VolumeSource {
 
   std::string name() const override { return path_; }
   Vec3s dims() const override { return spec_.dims; }
-  ValueType type() const override { return spec_.type; }
+  ValueType type() const override { return stored_type(spec_.type); }
   Vec3d spacing() const override { return spec_.spacing; }
   Vec3d origin() const override { return spec_.origin; }
-  std::optional<ValueRange> value_range_hint() const override { return spec_.range; }
+  std::optional<ValueRange> value_range_hint() const override {
+    if (conversion_ && conversion_->min <= conversion_->max) return ValueRange{conversion_->min, conversion_->max};
+    return spec_.range;
+  }
+  bool may_contain_nonfinite() const override {
+    return conversion_ ? conversion_->nonfinite > 0 : spec_.type == ElementType::f32;
+  }
+  std::optional<ConversionReport> conversion() const override { return conversion_; }
   uint64_t input_bytes() const override { return size_; }
 
   void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
-    const size_t slice = size_t(spec_.dims.x * spec_.dims.y) * size_of(spec_.type);
-    const std::byte* src = map_ + spec_.header_bytes + size_t(z0) * slice;
-    BY_CHECK_EQ(out.size(), size_t(z1 - z0) * slice);
-    std::memcpy(out.data(), src, out.size());
-    if (!spec_.little_endian && size_of(spec_.type) > 1) swap_bytes(out);
+    const size_t es = size_of(spec_.type);
+    const size_t voxels = size_t(z1 - z0) * size_t(spec_.dims.x * spec_.dims.y);
+    const std::byte* src = map_ + spec_.header_bytes + size_t(z0) * size_t(spec_.dims.x * spec_.dims.y) * es;
+    BY_CHECK_EQ(out.size(), voxels * size_of(type()));
+    if (is_native(spec_.type)) {
+      std::memcpy(out.data(), src, out.size());
+      if (!spec_.little_endian) swap_element_bytes(out, es);
+    } else {
+      converting_.resize(voxels * es);
+      std::memcpy(converting_.data(), src, converting_.size());
+      if (!spec_.little_endian) swap_element_bytes(converting_, es);
+      convert_elements(converting_.data(), spec_.type, voxels, out.data());
+    }
+    const size_t read_bytes = voxels * es;
     // Pages already copied will not be read again: let the kernel drop them, so importing a
     // file larger than memory does not evict everything else.
     const uintptr_t page = uintptr_t(::sysconf(_SC_PAGESIZE));
     const uintptr_t start = uintptr_t(src) & ~(page - 1);
-    ::madvise(reinterpret_cast<void*>(start), uintptr_t(src + out.size()) - start, MADV_DONTNEED);
+    ::madvise(reinterpret_cast<void*>(start), uintptr_t(src + read_bytes) - start, MADV_DONTNEED);
   }
 
   std::string describe_json() const override {
@@ -102,6 +121,8 @@ class RawSource final : public VolumeSource {
                         {"bytes", size_},
                         {"header_bytes", spec_.header_bytes},
                         {"endianness", spec_.little_endian ? "little" : "big"}};
+    if (!is_native(spec_.type)) j["element_type"] = std::string(to_string(spec_.type));
+    if (conversion_) j["conversion"] = nlohmann::json::parse(conversion_->to_json());
     if (spec_.xxh3_64) j["xxh3_64"] = fmt::format("{:016x}", *spec_.xxh3_64);
     else j["mtime_ns"] = mtime_ns_;
     if (!spec_.generator_json.empty()) j["generator"] = nlohmann::json::parse(spec_.generator_json);
@@ -124,9 +145,21 @@ class RawSource final : public VolumeSource {
         .with_field("xxh3_64");
   }
 
-  void swap_bytes(std::span<std::byte> data) const {
-    const size_t n = size_of(spec_.type);
-    for (size_t i = 0; i + n <= data.size(); i += n) std::reverse(data.begin() + long(i), data.begin() + long(i + n));
+  /// One pass over the file before anything is built: a conversion that would change values
+  /// is refused (check_conversion) before the store is touched.
+  void measure_conversion() {
+    const size_t es = size_of(spec_.type), slice = size_t(spec_.dims.x * spec_.dims.y) * es;
+    try {
+      conversion_ = scan_conversion(spec_.dims, spec_.type, [&](int64_t z0, int64_t, std::span<std::byte> out) {
+        std::memcpy(out.data(), map_ + spec_.header_bytes + size_t(z0) * slice, out.size());
+        if (!spec_.little_endian) swap_element_bytes(out, es);
+      });
+      check_conversion(*conversion_, spec_.convert, path_);
+    } catch (...) {
+      ::munmap(const_cast<std::byte*>(map_), size_);
+      ::close(fd_);
+      throw;
+    }
   }
 
   std::string path_;
@@ -135,6 +168,8 @@ class RawSource final : public VolumeSource {
   uint64_t size_ = 0;
   int64_t mtime_ns_ = 0;
   const std::byte* map_ = nullptr;
+  std::optional<ConversionReport> conversion_;
+  std::vector<std::byte> converting_;  ///< a slab of file elements on their way to f32
 };
 
 class FieldSource final : public VolumeSource {

@@ -13,6 +13,7 @@
 #include "core/math.h"
 #include "core/value_type.h"
 #include "fields/field.h"
+#include "preprocess/convert.h"
 
 namespace brickyard {
 
@@ -37,8 +38,14 @@ class VolumeSource {
   /// come in increasing z; rewind() starts over at z = 0.
   virtual void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) = 0;
   virtual void rewind() {}
+  /// @brief Whether read_slab may skip slices (calls still come in increasing z); a stream that
+  /// decompresses must read every slice.
+  virtual bool can_skip() const { return true; }
   /// @brief Provenance as a JSON object (kind, path, size, checksum, parameters).
   virtual std::string describe_json() const = 0;
+  /// @brief What converting the file's elements to the stored type did (u32, i32, f64 files),
+  /// measured when the source was opened; nullopt when values are stored as they are.
+  virtual std::optional<ConversionReport> conversion() const { return std::nullopt; }
   /// @brief Total input bytes, for throughput figures (the raw file size, or dims * type size).
   virtual uint64_t input_bytes() const { return uint64_t(volume(dims())) * size_of(type()); }
 };
@@ -46,7 +53,9 @@ class VolumeSource {
 /// @brief How a raw file is laid out (everything the sidecar would say).
 struct RawFileSpec {
   Vec3s dims{0};
-  ValueType type = ValueType::u8;
+  /// What the file holds; stored as stored_type(type), converted when not native.
+  ElementType type = ElementType::u8;
+  ConvertOptions convert;
   bool little_endian = true;
   uint64_t header_bytes = 0;  ///< bytes to skip before the first voxel
   Vec3d spacing{1.0};
@@ -61,12 +70,33 @@ struct RawFileSpec {
   std::string generator_json;
 };
 
-/// @brief A raw file, memory-mapped. Checks its size against dims, type and header first.
+/// @brief A raw file, memory-mapped. Checks its size against dims, type and header first; a
+/// file of u32, i32 or f64 is scanned once to measure its conversion (check_conversion).
 std::unique_ptr<VolumeSource> open_raw_source(const std::string& path, const RawFileSpec& spec);
 /// @brief A procedural field sampled on the fly (no temporary file).
 std::unique_ptr<VolumeSource> make_field_source(std::unique_ptr<Field> field, const Vec3s& dims, ValueType type);
 /// @brief A NRRD file (raw or gzip encoding; attached or detached data).
-std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path);
+/// Types map onto the stored ones (short -> i16, ...); int, uint and double convert to f32.
+std::unique_ptr<VolumeSource> open_nrrd_source(const std::string& path, const ConvertOptions& convert = {});
+/// @brief A MetaImage file (ITK, 3D Slicer): .mha with its data attached, or .mhd naming a data
+/// file; raw (memory-mapped) or zlib-compressed (streamed slab by slab). NDims 2 or 3, one
+/// channel; MET_UINT, MET_INT and MET_DOUBLE convert to f32 as NRRD's do. TransformMatrix and
+/// AnatomicalOrientation are recorded in the source's provenance, not applied.
+std::unique_ptr<VolumeSource> open_metaimage_source(const std::string& path, const ConvertOptions& convert = {});
+/// @brief How a NIfTI file is read.
+struct NiftiOptions {
+  ConvertOptions convert;
+  /// Which volume of a 4D file (0-based, `--time-step`); a 4D file needs one.
+  std::optional<int64_t> time_step;
+};
+/// @brief A NIfTI-1 or NIfTI-2 file (.nii, .nii.gz, .hdr/.img, .img.gz), streamed slab by slab.
+/// u8, i8, u16, i16 and f32 are stored as they are; u32, i32 and f64 convert to f32 (measured
+/// first, as raw files); scl_slope/scl_inter scaling is applied (integer results stay integers
+/// where they fit, else f32). Spacing from pixdim, origin from the sform or qform; the affine is
+/// recorded in the source's provenance, not applied (the grid is axis-aligned).
+std::unique_ptr<VolumeSource> open_nifti_source(const std::string& path, const NiftiOptions& options = {});
+/// @brief Whether this build can read NIfTI files (nifticlib was found).
+bool nifti_support();
 /// @brief Whether this build can read OpenVDB files.
 bool vdb_support();
 /// @brief One grid of an OpenVDB file (float, double or int32; level set or fog volume).

@@ -69,11 +69,9 @@ void read_table_chunk(const std::optional<std::span<const std::byte>>& value, si
 /// the type): finite, and for the integer types a whole number within their range.
 bool holds_value(ValueType t, float v) {
   switch (t) {
-    case ValueType::u8: return v >= 0.0f && v <= 255.0f && v == std::floor(v);
-    case ValueType::u16: return v >= 0.0f && v <= 65535.0f && v == std::floor(v);
     case ValueType::f32: return std::isfinite(v);
+    default: return v >= integer_min(t) && v <= integer_max(t) && v == std::floor(v);
   }
-  return false;
 }
 
 /// Writes the manifest's text and its checksum (in the writer's next transaction).
@@ -310,9 +308,11 @@ void Store::load_node_table(const lmdb::ReadTxn& txn) {
       if (r.is_constant() && !holds_value(manifest_.format.type, r.constant))
         throw Error(Errc::corrupt, fmt::format("the node table gives the brick the constant value {}, which is not a {} value{}",
                                                r.constant, to_string(manifest_.format.type),
-                                               manifest_.format.type == ValueType::u8    ? " (a whole number in [0, 255])"
-                                               : manifest_.format.type == ValueType::u16 ? " (a whole number in [0, 65535])"
-                                                                                         : " (a finite number)"))
+                                               is_integer(manifest_.format.type)
+                                                   ? fmt::format(" (a whole number in [{:g}, {:g}])",
+                                                                 integer_min(manifest_.format.type),
+                                                                 integer_max(manifest_.format.type))
+                                                   : std::string(" (a finite number)")))
             .with_file(dir)
             .with_key(layout_.key_at(level, int64_t(i)).to_string());
     }

@@ -1,7 +1,7 @@
 #pragma once
 /// @file corner_lanes.h
 /// @brief The corner values of 8 trilinear cells of one brick side by side, for a DVR sample
-/// run (dvr.cpp, sample_run): AVX2 gathers where the voxels are 16-bit or float, one
+/// run (dvr.cpp, sample_run): AVX2 gathers where the voxels are 16-bit (either sign) or float, one
 /// load at a time otherwise.
 
 #include <cstdint>
@@ -20,18 +20,23 @@ template <typename Voxel>
 inline void load_cell_corners(const Voxel* brick, const int32_t (&offset)[8], int32_t e, float (&corner)[8][8]) {
   const int32_t row[4] = {0, e, e * e, e * e + e};  // the 4 rows of 2 corners along x
 #if defined(__AVX2__)
-  if constexpr (std::is_same_v<Voxel, uint16_t>) {
+  if constexpr (std::is_same_v<Voxel, uint16_t> || std::is_same_v<Voxel, int16_t>) {
     // A row's two corners in one 32-bit read (low half, high half: x86 is little-endian): 4
     // gathers for 8 corners of 8 cells, against 64 loads. The last read ends at the cell's last
     // corner, inside the brick.
     __m256i at;
     std::memcpy(&at, offset, sizeof at);
-    const __m256i low16 = _mm256_set1_epi32(0xffff);
+    [[maybe_unused]] const __m256i low16 = _mm256_set1_epi32(0xffff);
     for (int r = 0; r < 4; ++r) {
       const __m256i index = _mm256_add_epi32(at, _mm256_set1_epi32(row[r]));
       const __m256i pair = _mm256_i32gather_epi32(reinterpret_cast<const int*>(brick), index, sizeof(Voxel));
-      _mm256_storeu_ps(corner[2 * r], _mm256_cvtepi32_ps(_mm256_and_si256(pair, low16)));
-      _mm256_storeu_ps(corner[2 * r + 1], _mm256_cvtepi32_ps(_mm256_srli_epi32(pair, 16)));
+      if constexpr (std::is_signed_v<Voxel>) {  // sign-extend each half
+        _mm256_storeu_ps(corner[2 * r], _mm256_cvtepi32_ps(_mm256_srai_epi32(_mm256_slli_epi32(pair, 16), 16)));
+        _mm256_storeu_ps(corner[2 * r + 1], _mm256_cvtepi32_ps(_mm256_srai_epi32(pair, 16)));
+      } else {
+        _mm256_storeu_ps(corner[2 * r], _mm256_cvtepi32_ps(_mm256_and_si256(pair, low16)));
+        _mm256_storeu_ps(corner[2 * r + 1], _mm256_cvtepi32_ps(_mm256_srli_epi32(pair, 16)));
+      }
     }
     return;
   } else if constexpr (std::is_same_v<Voxel, float>) {

@@ -61,7 +61,7 @@ namespace brickyard::gigavoxels {
 
 /// The brick pool's voxel types (a store's own, or float for produced bricks): each .cpp
 /// explicitly instantiates what it defines, X(type) for each.
-#define BRICKYARD_GIGAVOXELS_FOR_VOXELS(X) X(uint8_t) X(uint16_t) X(float)
+#define BRICKYARD_GIGAVOXELS_FOR_VOXELS(X) X(uint8_t) X(int8_t) X(uint16_t) X(int16_t) X(float)
 
 inline constexpr double kInf = std::numeric_limits<double>::infinity();
 inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();

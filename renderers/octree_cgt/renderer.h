@@ -32,7 +32,7 @@
 namespace brickyard::octree_cgt {
 
 /// The store's value types: each .cpp explicitly instantiates what it defines, X(type) for each.
-#define BRICKYARD_OCTREE_CGT_FOR_VOXELS(X) X(uint8_t) X(uint16_t) X(float)
+#define BRICKYARD_OCTREE_CGT_FOR_VOXELS(X) X(uint8_t) X(int8_t) X(uint16_t) X(int16_t) X(float)
 
 /// The SIMD lanes of the build's target, in float: a packlet's width by default.
 #if defined(__AVX512F__)

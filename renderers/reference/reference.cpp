@@ -62,8 +62,8 @@ class AnalyticTruth {
       auto q = g->find("quantization");
       if (q == g->end() || !q->is_array() || q->size() != 2) return nullptr;
       const double lo = (*q)[0].get<double>(), hi = (*q)[1].get<double>();
-      truth->scale_ = integer_max(type) / (hi - lo);
-      truth->offset_ = -lo * truth->scale_;
+      truth->scale_ = (integer_max(type) - integer_min(type)) / (hi - lo);
+      truth->offset_ = integer_min(type) - lo * truth->scale_;
     }
     return truth;
   }

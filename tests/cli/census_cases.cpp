@@ -218,6 +218,30 @@ void add_import_cases(std::vector<Case>& c) {
                "field '--transaction-size'"});
   c.push_back({"import", "--constant-tolerance below zero", {},
                "brickyard import " + raw16 + " --constant-tolerance -1 --out $TMP/i.store", 2, "field '--constant-tolerance'"});
+  c.push_back({"import", "unknown raw --type", {}, "brickyard import $TMP/s.raw --dims 16 --type u64 --out $TMP/i.store", 2,
+               "field '--type': unknown value type 'u64' (expected u8, i8, u16, i16, f32, or u32, i32, f64"});
+  c.push_back({"import", "32-bit integers that f32 would round",
+               [](const Workspace& ws) {
+                 std::vector<uint32_t> v(4 * 4 * 4, 7);
+                 v[9] = (1u << 24) + 3;
+                 ws.write("wide.raw", std::string(reinterpret_cast<const char*>(v.data()), v.size() * 4));
+               },
+               "brickyard import $TMP/wide.raw --dims 4 --type u32 --out $TMP/i.store", 2,
+               "$TMP/wide.raw: field '--convert': 1 of its u32 values exceed 2^24 in magnitude"});
+  c.push_back({"import", "doubles beyond the float range",
+               [](const Workspace& ws) {
+                 std::vector<double> v(4 * 4 * 4, 0.5);
+                 v[2] = 1e300;
+                 ws.write("huge.raw", std::string(reinterpret_cast<const char*>(v.data()), v.size() * 8));
+               },
+               "brickyard import $TMP/huge.raw --dims 4 --type f64 --out $TMP/i.store", 1,
+               "$TMP/huge.raw: field 'type': 1 of its f64 values lie beyond the largest float"});
+  c.push_back({"import", "unknown --convert", {}, "brickyard import " + raw16 + " --convert f16 --out $TMP/i.store", 2,
+               "field '--convert': 'f16' is not a conversion brickyard makes"});
+  c.push_back({"import", "--convert for a field", {}, "brickyard import field:sphere --convert f32 --out $TMP/i.store", 2,
+               "field '--convert': does not apply to a field: source"});
+  c.push_back({"import", "--background not a number", {}, "brickyard import " + raw16 + " --background air --out $TMP/i.store", 2,
+               "field '--background': 'air' is not a number"});
   c.push_back({"import", "NaN voxels",
                [](const Workspace& ws) {
                  std::vector<float> v(8 * 8 * 8, 1.0f);
@@ -362,6 +386,46 @@ void add_nrrd_and_vdb_cases(std::vector<Case>& c) {
   c.push_back({"import", "NRRD: gzip encoding of data that is not gzip",
                nrrd("notgz.nrrd", nrrd_head + "sizes: 16 16 16\nencoding: gzip\n"), "brickyard import $TMP/notgz.nrrd --out $TMP/i.store",
                1, "$TMP/notgz.nrrd: field 'encoding': the header says encoding gzip, but the data at byte"});
+
+  // MetaImage: a 16^3 header; ElementType, compression and ElementDataFile follow per case.
+  const std::string mha_head = "ObjectType = Image\nNDims = 3\nBinaryData = True\nDimSize = 16 16 16\n";
+  c.push_back({"import", "MetaImage: data truncated",
+               text("trunc.mha", mha_head + "ElementType = MET_UCHAR\nElementDataFile = LOCAL\n" + std::string(100, '\1')),
+               "brickyard import $TMP/trunc.mha --out $TMP/i.store", 1,
+               "$TMP/trunc.mha: field 'DimSize': data is truncated: 100 bytes after the header, but DimSize 16x16x16 of "
+               "MET_UCHAR needs 4096"});
+  c.push_back({"import", "MetaImage: unknown ElementType",
+               text("type.mha", mha_head + "ElementType = MET_BLOB\nElementDataFile = LOCAL\n" + std::string(4096, '\1')),
+               "brickyard import $TMP/type.mha --out $TMP/i.store", 1,
+               "$TMP/type.mha: field 'ElementType': unknown ElementType 'MET_BLOB'"});
+  c.push_back({"import", "MetaImage: compressed data that is not zlib",
+               text("zbad.mha", mha_head + "CompressedData = True\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n" +
+                                    std::string(100, 'x')),
+               "brickyard import $TMP/zbad.mha --out $TMP/i.store", 1,
+               "$TMP/zbad.mha: field 'CompressedData': the zlib data is corrupt after 0 decompressed bytes: incorrect "
+               "header check"});
+  c.push_back({"import", "MetaImage: detached data file missing",
+               text("nodata.mhd", mha_head + "ElementType = MET_UCHAR\nElementDataFile = nothere.raw\n"),
+               "brickyard import $TMP/nodata.mhd --out $TMP/i.store", 1,
+               "$TMP/nodata.mhd: field 'ElementDataFile': the data file 'nothere.raw' does not exist"});
+
+  // NIfTI: files nibabel wrote (tests/data/nifti/), or a copy cut short. Where this build has no
+  // nifticlib, every NIfTI file is refused alike, so only the option check is a case then.
+  c.push_back({"import", "--time-step for a raw file", {}, "brickyard import " + raw16 + " --time-step 1 --out $TMP/i.store", 2,
+               "field '--time-step': does not apply to a raw file"});
+#if BRICKYARD_HAVE_NIFTI
+  c.push_back({"import", "NIfTI: data truncated",
+               [](const Workspace& ws) {
+                 ws.write("trunc.nii", testing::read_file(kSource + "/tests/data/nifti/int16.nii").substr(0, 672));
+               },
+               "brickyard import $TMP/trunc.nii --out $TMP/i.store", 1,
+               "$TMP/trunc.nii: field 'dim': the data is truncated: 320 bytes from byte 352 (vox_offset), but 7x6x5 INT16 "
+               "needs 420"});
+  c.push_back({"import", "NIfTI: unsupported datatype", {}, "brickyard import $SRC/tests/data/nifti/complex64.nii --out $TMP/i.store", 1,
+               "$SRC/tests/data/nifti/complex64.nii: field 'datatype': datatype 32 (COMPLEX64) is not supported"});
+  c.push_back({"import", "NIfTI: 4D without --time-step", {}, "brickyard import $SRC/tests/data/nifti/4d.nii --out $TMP/i.store", 2,
+               "$SRC/tests/data/nifti/4d.nii: field '--time-step': the file holds 3 time steps (dim[4])"});
+#endif
 }
 
 void add_scene_cases(std::vector<Case>& c) {

@@ -158,7 +158,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadImport{"truncated", "", "import RAW --dims 10,10,20 --type u8 --out OUT", "file is truncated: 1000 bytes, but 10x10x20 u8 needs 2000"},
         BadImport{"too_long", "", "import RAW --dims 10,10,5 --type u8 --out OUT", "larger than its dims say"},
         BadImport{"dims_overflow", "", "import RAW --dims 4000000000,4000000000,4000000000 --type u16 --out OUT", "overflow a 64-bit byte count"},
-        BadImport{"unknown_type", "", "import RAW --dims 10,10,10 --type i32 --out OUT", "unknown value type 'i32'"},
+        BadImport{"unknown_type", "", "import RAW --dims 10,10,10 --type u64 --out OUT", "unknown value type 'u64'"},
         BadImport{"no_description", "", "import RAW --out OUT", "needs --dims and --type, or a sidecar"},
         BadImport{"missing_file", "", "import DIR/nothing.raw --dims 4 --type u8 --out OUT", "nothing.raw: cannot open"},
         BadImport{"bad_codec", "", "import RAW --dims 10 --type u8 --codec zstd --out OUT", "unknown codec 'zstd'"},

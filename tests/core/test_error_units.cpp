@@ -46,17 +46,47 @@ TEST(ValueType, NamesSizesAndParsing) {
   EXPECT_EQ(size_of(ValueType::u8), 1u);
   EXPECT_EQ(size_of(ValueType::u16), 2u);
   EXPECT_EQ(size_of(ValueType::f32), 4u);
-  for (auto t : {ValueType::u8, ValueType::u16, ValueType::f32}) EXPECT_EQ(parse_value_type(to_string(t)), t);
+  EXPECT_EQ(size_of(ValueType::i8), 1u);
+  EXPECT_EQ(size_of(ValueType::i16), 2u);
+  for (auto t : {ValueType::u8, ValueType::i8, ValueType::u16, ValueType::i16, ValueType::f32}) {
+    EXPECT_EQ(parse_value_type(to_string(t)), t);
+    EXPECT_TRUE(is_value_type_code(uint8_t(t)));
+    EXPECT_EQ(stored_type(element_type(t)), t);
+    EXPECT_TRUE(is_native(element_type(t)));
+    if (is_integer(t)) {
+      EXPECT_EQ(integer_count(t), size_t(1) << (8 * size_of(t)));
+    }
+  }
+  EXPECT_FALSE(is_value_type_code(0));
+  EXPECT_FALSE(is_value_type_code(6));
+  EXPECT_EQ(integer_min(ValueType::i16), -32768.0);
+  EXPECT_EQ(integer_max(ValueType::i8), 127.0);
   EXPECT_EQ(parse_value_type("float"), ValueType::f32);
+  EXPECT_EQ(parse_value_type("int16"), ValueType::i16);
   EXPECT_FALSE(parse_value_type("f64").has_value());
+  // Files may hold 32-bit integers and doubles: they are element types, stored as f32.
+  for (const char* name : {"u32", "i32", "f64", "double"}) {
+    const auto e = parse_element_type(name);
+    ASSERT_TRUE(e.has_value()) << name;
+    EXPECT_FALSE(is_native(*e));
+    EXPECT_EQ(stored_type(*e), ValueType::f32);
+  }
+  EXPECT_EQ(size_of(ElementType::f64), 8u);
   try {
     value_type_from_string("i32", "--type");
     FAIL();
   } catch (const Error& e) {
     EXPECT_EQ(e.field(), "--type");
-    EXPECT_NE(std::string(e.what()).find("u8, u16 or f32"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("u8, i8, u16, i16 or f32"), std::string::npos);
+  }
+  try {
+    element_type_from_string("u64", "--type");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("or u32, i32, f64 to convert to f32"), std::string::npos);
   }
   EXPECT_EQ(dispatch_value_type(ValueType::u16, [](auto tag) { return sizeof(tag); }), 2u);
+  EXPECT_EQ(dispatch_value_type(ValueType::i16, [](auto tag) { return std::is_signed_v<decltype(tag)>; }), true);
 }
 
 TEST(Units, HumanReadableNumbers) {

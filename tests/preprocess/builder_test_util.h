@@ -1,6 +1,7 @@
 #pragma once
 // Reference implementations for the builder tests: dense grids and a plain 2x pyramid.
 
+#include <cmath>
 #include <cstring>
 #include <vector>
 
@@ -55,7 +56,7 @@ Grid<T> halve(const Grid<T>& g) {
         if constexpr (std::is_same_v<T, float>)
           out = ((fsum[0] + fsum[1]) + (fsum[2] + fsum[3]) + (fsum[4] + fsum[5]) + (fsum[6] + fsum[7])) * 0.125f;
         else
-          out = T((uint32_t(sum) + 4) >> 3);
+          out = T(int64_t(std::floor((sum + 4) / 8)));
       }
   return c;
 }

@@ -50,6 +50,8 @@ void expect_pyramid_matches(const std::string& field_name, const Vec3s& dims, co
 TEST(Builder, EveryLevelEqualsTheReferencePyramid) {
   expect_pyramid_matches<uint8_t>("sphere", {40, 37, 29}, small_bricks());
   expect_pyramid_matches<uint16_t>("gyroid", {33, 16, 17}, small_bricks(16, 2));
+  expect_pyramid_matches<int8_t>("fbm", {27, 19, 21}, small_bricks());
+  expect_pyramid_matches<int16_t>("marschner-lobb", {33, 16, 17}, small_bricks(16, 2));
   expect_pyramid_matches<float>("marschner-lobb", {24, 24, 24}, small_bricks(8, 0));
 }
 
@@ -198,7 +200,7 @@ TEST(Builder, RawFileRoundTripsBitExactlyThroughTheStore) {
   const RawVolumeInfo info = write_raw_grid(sampler, dir.file("t.raw"));
   RawFileSpec spec;
   spec.dims = info.dims;
-  spec.type = info.type;
+  spec.type = element_type(info.type);
   auto source = open_raw_source(dir.file("t.raw"), spec);
   build_store(*source, dir.file("s"), small_bricks(16));
   Store store(dir.file("s"));
@@ -231,7 +233,7 @@ TEST(Builder, BigEndianRawAndHeaderBytesAreHonoured) {
   std::ofstream(dir.file("be.raw"), std::ios::binary) << bytes;
   RawFileSpec spec;
   spec.dims = dims;
-  spec.type = ValueType::u16;
+  spec.type = ElementType::u16;
   spec.little_endian = false;
   spec.header_bytes = 8;
   auto source = open_raw_source(dir.file("be.raw"), spec);

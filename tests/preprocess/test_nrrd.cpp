@@ -78,7 +78,7 @@ TEST(Nrrd, DetachedBigEndianUnsignedShortWithSpaceDirections) {
   EXPECT_EQ(Store(dir.file("s")).manifest().spacing, Vec3d(3, 4, 2));
 }
 
-TEST(Nrrd, GzipFloatStreamsAndSignedShortConvertsToFloat) {
+TEST(Nrrd, GzipFloatStreamsAndSignedShortStaysSignedShort) {
   testing::TempDir dir;
 #if BRICKYARD_TEST_GZIP
   std::vector<float> f(10 * 10 * 10);
@@ -89,15 +89,71 @@ TEST(Nrrd, GzipFloatStreamsAndSignedShortConvertsToFloat) {
 #endif
 
   std::vector<int16_t> s(6 * 5 * 4);
-  std::vector<float> expected;
-  for (size_t i = 0; i < s.size(); ++i) {
-    s[i] = int16_t(int(i) * 300 - 20000);
-    expected.push_back(float(s[i]));
-  }
+  for (size_t i = 0; i < s.size(); ++i) s[i] = int16_t(int(i) * 300 - 20000);
   std::ofstream(dir.file("h.nrrd"), std::ios::binary)
       << "NRRD0004\ntype: short\ndimension: 3\nsizes: 6 5 4\nendian: little\nencoding: raw\n\n" << to_bytes(s);
-  EXPECT_EQ(open_nrrd_source(dir.file("h.nrrd"))->type(), ValueType::f32);
-  EXPECT_EQ(import_finest<float>(dir.file("h.nrrd"), dir.file("t")), expected);
+  EXPECT_EQ(open_nrrd_source(dir.file("h.nrrd"))->type(), ValueType::i16);
+  EXPECT_EQ(import_finest<int16_t>(dir.file("h.nrrd"), dir.file("t")), s);
+  // Big-endian signed bytes and shorts, gzip-streamed where zlib is there, stay native too.
+  std::vector<int8_t> b(6 * 5 * 4);
+  for (size_t i = 0; i < b.size(); ++i) b[i] = int8_t(int(i % 256) - 128);
+  std::ofstream(dir.file("b.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: signed char\ndimension: 3\nsizes: 6 5 4\nencoding: raw\n\n" << to_bytes(b);
+  EXPECT_EQ(import_finest<int8_t>(dir.file("b.nrrd"), dir.file("b")), b);
+#if BRICKYARD_TEST_GZIP
+  std::ofstream(dir.file("hz.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: int16\ndimension: 3\nsizes: 6 5 4\nendian: big\nencoding: gzip\n\n" << gzip(to_bytes(s, true));
+  EXPECT_EQ(open_nrrd_source(dir.file("hz.nrrd"))->type(), ValueType::i16);
+  EXPECT_EQ(import_finest<int16_t>(dir.file("hz.nrrd"), dir.file("hz")), s);
+#endif
+}
+
+TEST(Nrrd, IntAndDoubleConvertToFloatWithTheirErrorMeasured) {
+  testing::TempDir dir;
+  // Integers within 2^24 convert exactly.
+  std::vector<int32_t> small(4 * 4 * 4);
+  for (size_t i = 0; i < small.size(); ++i) small[i] = int32_t(i) * 250000 - 8000000;
+  std::ofstream(dir.file("i.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: int\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n" << to_bytes(small);
+  auto source = open_nrrd_source(dir.file("i.nrrd"));
+  ASSERT_TRUE(source->conversion());
+  EXPECT_TRUE(source->conversion()->exact());
+  EXPECT_EQ(source->conversion()->min, -8000000);
+  std::vector<float> expected(small.begin(), small.end());
+  EXPECT_EQ(import_finest<float>(dir.file("i.nrrd"), dir.file("i")), expected);
+  EXPECT_NE(Store(dir.file("i")).manifest().source.find("\"conversion\""), std::string::npos);
+
+  // Beyond 2^24 they are refused, naming the option that accepts the rounding...
+  std::vector<uint32_t> big(4 * 4 * 4, 7);
+  big[5] = (1u << 24) + 1;  // rounds to 2^24
+  std::ofstream(dir.file("u.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: uint\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n" << to_bytes(big);
+  try {
+    open_nrrd_source(dir.file("u.nrrd"));
+    ADD_FAILURE() << "rounded u32 values without --convert f32";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::invalid_argument);
+    for (const char* text : {"u.nrrd", "--convert f32", "1 of its u32 values", "by up to 1"})
+      EXPECT_NE(std::string(e.what()).find(text), std::string::npos) << e.what();
+  }
+  // ... which, accepted, is reported exactly.
+  ConvertOptions accept;
+  accept.accept_rounding = true;
+  source = open_nrrd_source(dir.file("u.nrrd"), accept);
+  EXPECT_EQ(source->conversion()->inexact, 1u);
+  EXPECT_EQ(source->conversion()->max_abs_error, 1.0);
+  EXPECT_EQ(source->conversion()->worst_value, double((1u << 24) + 1));
+
+  // Doubles convert with their largest relative error reported.
+  std::vector<double> d(4 * 4 * 4, 0.5);
+  d[3] = 0.1;
+  std::ofstream(dir.file("d.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: double\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n" << to_bytes(d);
+  source = open_nrrd_source(dir.file("d.nrrd"));
+  EXPECT_EQ(source->type(), ValueType::f32);
+  EXPECT_EQ(source->conversion()->inexact, 1u);
+  EXPECT_DOUBLE_EQ(source->conversion()->max_rel_error, std::fabs(double(0.1f) - 0.1) / 0.1);
+  EXPECT_NE(source->conversion()->summary().find("largest relative error"), std::string::npos);
 }
 
 void expect_error(const std::string& path, Errc code, const std::string& text) {
@@ -120,7 +176,7 @@ TEST(Nrrd, BadFilesAreClearErrors) {
   std::ofstream(dir.file("nosizes.nrrd")) << "NRRD0004\ntype: float\ndimension: 3\nencoding: raw\nendian: little\n\n";
   expect_error(dir.file("nosizes.nrrd"), Errc::format, "field 'sizes'");
   std::ofstream(dir.file("short.nrrd"), std::ios::binary)
-      << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\n" << std::string(50, 'x');
+      << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n" << std::string(50, 'x');
   expect_error(dir.file("short.nrrd"), Errc::format, "truncated");
   std::ofstream(dir.file("ascii.nrrd")) << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n\n1 2 3 4 5 6 7 8\n";
   expect_error(dir.file("ascii.nrrd"), Errc::unsupported, "encoding 'ascii'");

@@ -21,21 +21,27 @@
 
 namespace brickyard::testing {
 
-/// An f32 volume held in memory, its voxels `spacing` apart from the origin.
+/// A volume held in memory as floats, its voxels `spacing` apart from the origin, stored as
+/// `type` (an integer type takes each value converted as it is: whole numbers in its range).
 class ArraySource final : public VolumeSource {
  public:
-  ArraySource(const Vec3s& dims, std::vector<float> values, const Vec3d& spacing = Vec3d(1.0))
-      : dims_(dims), values_(std::move(values)), spacing_(spacing) {
+  ArraySource(const Vec3s& dims, std::vector<float> values, const Vec3d& spacing = Vec3d(1.0),
+              ValueType type = ValueType::f32)
+      : dims_(dims), values_(std::move(values)), spacing_(spacing), type_(type) {
     BY_CHECK(int64_t(values_.size()) == volume(dims_));
   }
   std::string name() const override { return "array"; }
   Vec3s dims() const override { return dims_; }
   Vec3d spacing() const override { return spacing_; }
-  ValueType type() const override { return ValueType::f32; }
+  ValueType type() const override { return type_; }
   void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
-    const size_t slice = size_t(dims_.x * dims_.y);
-    BY_CHECK(out.size() == size_t(z1 - z0) * slice * sizeof(float));
-    std::memcpy(out.data(), values_.data() + size_t(z0) * slice, out.size());
+    const size_t slice = size_t(dims_.x * dims_.y), n = size_t(z1 - z0) * slice;
+    BY_CHECK(out.size() == n * size_of(type_));
+    dispatch_value_type(type_, [&](auto tag) {
+      using T = decltype(tag);
+      T* dst = reinterpret_cast<T*>(out.data());
+      for (size_t i = 0; i < n; ++i) dst[i] = static_cast<T>(values_[size_t(z0) * slice + i]);
+    });
   }
   std::string describe_json() const override { return R"({"kind":"array"})"; }
 
@@ -43,11 +49,12 @@ class ArraySource final : public VolumeSource {
   Vec3s dims_;
   std::vector<float> values_;
   Vec3d spacing_;
+  ValueType type_;
 };
 
 inline std::string build_array(const TempDir& dir, const std::string& name, const Vec3s& dims, std::vector<float> v,
-                               int brick_size = 8, const Vec3d& spacing = Vec3d(1.0)) {
-  ArraySource src(dims, std::move(v), spacing);
+                               int brick_size = 8, const Vec3d& spacing = Vec3d(1.0), ValueType type = ValueType::f32) {
+  ArraySource src(dims, std::move(v), spacing, type);
   BuildOptions o;
   o.brick_size = brick_size;
   build_store(src, dir.file(name), o);
