@@ -60,7 +60,7 @@ struct ImportOptions {
   int brick_size = 32, apron = 1, hc_level = 9;
   std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size, transaction_size;
   std::string background, convert;
-  double constant_tolerance = 0;
+  double constant_tolerance = 0, checkpoint_seconds = 5;
   bool no_shuffle = false, no_map_growth = false, force = false, octree = false, no_disk_check = false;
   // meshes
   MeshImportOptions mesh;
@@ -233,7 +233,7 @@ void run_import(const ImportOptions& o) {
 
   const Vec3s d = source->dims();
   std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
-  Progress progress(fmt::format("import {}", fs::path(source->name()).filename().string()), uint64_t(volume(d)), "voxels");
+  Progress progress(fmt::format("import {}", fs::path(source->name()).filename().string()), source->input_bytes(), "B");
   const BuildResult r = build_store(*source, o.out, b, &progress);
   if (!r.up_to_date) progress.finish();  // otherwise it ends without a closing line: no work done
   if (r.up_to_date) {
@@ -243,6 +243,9 @@ void run_import(const ImportOptions& o) {
     if (octree_missing) run_build_octree(o.out, {});
     return;
   }
+  if (!(o.checkpoint_seconds >= 0))
+    throw Error(Errc::invalid_argument, "the time between checkpoints must be at least 0").with_field("--checkpoint-every");
+  b.checkpoint_seconds = o.checkpoint_seconds;
   if (r.rebuilt_incomplete) std::cout << "an interrupted earlier build was discarded and rebuilt\n";
   std::cout << fmt::format("wrote {}: {} levels, {} of bricks from {} of input ({:.2f}x) in {} ({}/s)\n", o.out,
                            r.manifest.levels, format_bytes(double(r.stored_bytes)), format_bytes(double(r.input_bytes)),
@@ -266,6 +269,9 @@ std::string sparkline(const Histogram& h, int width) {
   std::vector<double> cols(size_t(width), 0);
   for (size_t i = 0; i < h.counts.size(); ++i) cols[i * size_t(width) / h.counts.size()] += double(h.counts[i]);
   double mx = *std::max_element(cols.begin(), cols.end());
+  if (r.resumed_at_slice > 0)
+    std::cout << fmt::format("resumed an interrupted build of the same import at slice {} of {} ({:.0f}% done before)\n",
+                             r.resumed_at_slice, d.z, 100.0 * double(r.resumed_at_slice) / double(d.z));
   std::string out;
   for (double c : cols) {
     // Log scale: volume histograms are dominated by the background bin.
@@ -613,6 +619,11 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("STORE", *path, "Store directory")->required();
     cmd->callback([path, &exit_status] { exit_status = run_verify(*path); });
   }
+    cmd->add_option("--checkpoint-every", o->checkpoint_seconds,
+                    "Seconds between checkpoints a killed import resumes from when run again (at most; a "
+                    "checkpoint costing over 5% of the time waits longer); 0: after every row of bricks")
+        ->capture_default_str()
+        ->group(build);
   {
     struct ExportOptions {
       std::string store, box, out, grid, encoding;

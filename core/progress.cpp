@@ -56,6 +56,11 @@ void Progress::advance(uint64_t n) {
   report(false);
 }
 
+void Progress::start_at(uint64_t n) {
+  already_done_ = n;
+  done_.store(n, std::memory_order_relaxed);
+}
+
 void Progress::finish() {
   std::lock_guard lock(print_mutex_);
   if (finished_) return;
@@ -66,11 +71,12 @@ void Progress::finish() {
 void Progress::report(bool final_line) {
   const double t = watch_.seconds();
   const double done = static_cast<double>(done_.load(std::memory_order_relaxed));
-  const double rate = t > 0 ? done / t : 0.0;
+  const double rate = t > 0 ? (done - static_cast<double>(already_done_)) / t : 0.0;
   const std::string rate_text = (unit_ == "B" ? format_bytes(rate) : amount(rate)) + "/s";
 
   if (final_line) {
-    std::string line = fmt::format("{}: {} in {} ({})", label_, amount(done), format_duration(t), rate_text);
+    std::string line = fmt::format("{}: {} in {} ({})", label_, amount(done - static_cast<double>(already_done_)),
+                                   format_duration(t), rate_text);
     if (style_ == ProgressStyle::bar) *out_ << "\r\033[K";
     *out_ << line << '\n' << std::flush;
     return;

@@ -47,6 +47,9 @@ class Progress {
 
   /// @brief Records n more units done; thread-safe.
   void advance(uint64_t n);
+  /// @brief Work done before this run (a resumed build): counted as done, not in the rate or
+  /// the time left. Call before advance().
+  void start_at(uint64_t n);
   /// @brief Prints the closing line (total, time, mean rate). Idempotent; the destructor calls it.
   void finish();
 
@@ -64,6 +67,7 @@ class Progress {
   double interval_;
   Stopwatch watch_;
   std::atomic<uint64_t> done_{0};
+  uint64_t already_done_ = 0;
   std::atomic<int64_t> next_report_ns_;
   std::mutex print_mutex_;  // guards printing and finished_
   bool finished_ = false;

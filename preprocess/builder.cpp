@@ -1,8 +1,5 @@
 #include "preprocess/builder.h"
 
-#include <fcntl.h>  // AT_FDCWD, for renameat2
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <atomic>
@@ -29,6 +26,7 @@
 #include "core/progress.h"
 #include "core/timing.h"
 #include "preprocess/background.h"
+#include "preprocess/build_state.h"
 #include "preprocess/box_filter.h"
 #include "preprocess/volume_source.h"
 #include "storage/store.h"
@@ -90,14 +88,13 @@ class RecordWriter {
     if (thread_.joinable()) thread_.join();
   }
 
-  void push(const BrickKey& key, std::vector<std::byte>&& record) {
-    std::unique_lock lock(mutex_);
-    space_.wait(lock, [&] { return queued_bytes_ < max_bytes_ || error_; });
-    if (error_) std::rethrow_exception(error_);
-    queued_bytes_ += record.size();
-    queue_.push_back({key, std::move(record)});
-    cv_.notify_one();
-  }
+  void push(const BrickKey& key, std::vector<std::byte>&& record) { enqueue({key, std::move(record), false}); }
+
+  /// The build's state after every record pushed so far: committed with them, in order.
+  void push_checkpoint(std::vector<std::byte>&& state) { enqueue({{}, std::move(state), true}); }
+
+  /// Seconds the writer spent on the last checkpoint (compressing and committing it).
+  double last_checkpoint_seconds() const { return last_checkpoint_seconds_.load(std::memory_order_relaxed); }
 
   /// Waits until every record is handed to the store; rethrows the writer's error.
   void close() {
@@ -114,7 +111,17 @@ class RecordWriter {
   struct Item {
     BrickKey key;
     std::vector<std::byte> record;
+    bool checkpoint = false;
   };
+
+  void enqueue(Item&& item) {
+    std::unique_lock lock(mutex_);
+    space_.wait(lock, [&] { return queued_bytes_ < max_bytes_ || error_; });
+    if (error_) std::rethrow_exception(error_);
+    queued_bytes_ += item.record.size();
+    queue_.push_back(std::move(item));
+    cv_.notify_one();
+  }
 
   void run() {
     try {
@@ -129,7 +136,13 @@ class RecordWriter {
           queued_bytes_ -= item.record.size();
         }
         space_.notify_one();
-        store_.put_brick(item.key, std::move(item.record));
+        if (item.checkpoint) {
+          const Stopwatch watch;
+          store_.put_checkpoint(item.record);
+          last_checkpoint_seconds_.store(watch.seconds(), std::memory_order_relaxed);
+        } else {
+          store_.put_brick(item.key, std::move(item.record));
+        }
       }
     } catch (...) {
       std::lock_guard lock(mutex_);
@@ -146,6 +159,7 @@ class RecordWriter {
   size_t queued_bytes_ = 0;
   bool closing_ = false, abandon_ = false;
   std::exception_ptr error_;
+  std::atomic<double> last_checkpoint_seconds_{0};
   std::thread thread_;
 };
 
@@ -166,6 +180,16 @@ struct BuildContext {
   ValueRange hist_range;
   size_t hist_bins = 256;
   tbb::enumerable_thread_specific<std::vector<uint64_t>> histograms;
+  std::vector<uint64_t> resumed_histogram;  ///< counted before the checkpoint a build resumed from
+
+  /// Every count so far, the threads' and a resumed build's.
+  std::vector<uint64_t> histogram() const {
+    std::vector<uint64_t> sum = resumed_histogram;
+    sum.resize(hist_bins, 0);
+    for (const auto& h : histograms)
+      for (size_t i = 0; i < h.size(); ++i) sum[i] += h[i];
+    return sum;
+  }
   struct AtomicStats {
     std::atomic<int64_t> constant{0}, empty{0};
     std::atomic<uint64_t> raw_bytes{0}, stored_bytes{0};
@@ -198,6 +222,27 @@ class Level {
     const int64_t z = received_++;
     if (coarser_ && (z & 1)) downsample(slice(z - 1), slice(z));
     while (next_row_ < bricks_.z && row_ready(next_row_)) process_row(next_row_++);
+  }
+
+  int64_t rows_done() const { return next_row_; }
+
+  /// Its part of a checkpoint: the counters and the slices later rows and the coarser level
+  /// still read, [next row's first slice - A, received), at most the ring's capacity.
+  void save(StateWriter& w) const {
+    const int64_t first = std::clamp<int64_t>(next_row_ * M_ - A_, 0, std::max<int64_t>(0, received_ - 1));
+    w.put(received_), w.put(next_row_), w.put(first);
+    for (int64_t z = first; z < received_; ++z)
+      w.put_bytes({reinterpret_cast<const std::byte*>(slice(z)), size_t(slice_voxels()) * sizeof(T)});
+  }
+  void restore(StateReader& r) {
+    received_ = r.get<int64_t>(), next_row_ = r.get<int64_t>();
+    const int64_t first = r.get<int64_t>();
+    if (received_ < 0 || received_ > dims_.z || next_row_ < 0 || next_row_ > bricks_.z || first < 0 || first > received_ ||
+        received_ - first > capacity_)
+      throw Error(Errc::corrupt, "the build checkpoint's level state does not fit the volume");
+    for (int64_t z = first; z < received_; ++z)
+      std::memcpy(ring_[size_t(z % capacity_)].data(), r.take(size_t(slice_voxels()) * sizeof(T)).data(),
+                  size_t(slice_voxels()) * sizeof(T));
   }
 
   /// End of input: flushes the last odd slice and the remaining rows, then the coarser levels.
@@ -465,9 +510,81 @@ std::string build_params_json(const BuildOptions& o, double source_background) {
   return j.dump();
 }
 
+// ---------------------------------------------------------------------------------------------
+// Checkpoints: everything but the levels' slices (those are Level::save's), after the identity.
+
+void save_common(StateWriter& w, const BuildIdentity& id, const BuildContext& ctx, const ScanResult& scan, int64_t z) {
+  put_identity(w, id);
+  w.put(z), w.put(ctx.background);
+  w.put(scan.nonfinite), w.put(scan.first), w.put(scan.min), w.put(scan.max);
+  w.put(ctx.hist_range), w.put(uint64_t(ctx.hist_bins));
+  for (const auto& s : ctx.stats) w.put(s.constant.load()), w.put(s.empty.load()), w.put(s.raw_bytes.load()), w.put(s.stored_bytes.load());
+  w.put_vector(ctx.histogram());
+  for (int l = 0; l < ctx.layout.levels; ++l) w.put_vector(ctx.nodes.level(l));
+}
+
+/// Restores what save_common wrote into a context set up for the same volume and parameters;
+/// returns the finest slices done.
+int64_t restore_common(StateReader& r, BuildContext& ctx, ScanResult& scan) {
+  if (!get_identity(r)) throw Error(Errc::corrupt, "the build checkpoint is of another format version");
+  const int64_t z = r.get<int64_t>();
+  ctx.background = r.get<double>();
+  scan.nonfinite = r.get<uint64_t>(), scan.first = r.get<Vec3s>(), scan.min = r.get<double>(), scan.max = r.get<double>();
+  ctx.hist_range = r.get<ValueRange>();
+  ctx.hist_bins = size_t(r.get<uint64_t>());
+  for (auto& s : ctx.stats) {
+    s.constant = r.get<int64_t>(), s.empty = r.get<int64_t>();
+    s.raw_bytes = r.get<uint64_t>(), s.stored_bytes = r.get<uint64_t>();
+  }
+  ctx.resumed_histogram = r.get_vector<uint64_t>();
+  bool fits = z > 0 && z <= ctx.layout.dims.z && ctx.resumed_histogram.size() == ctx.hist_bins;
+  for (int l = 0; l < ctx.layout.levels; ++l) {
+    auto nodes = r.get_vector<NodeRecord>();
+    fits = fits && nodes.size() == ctx.nodes.level(l).size();
+    if (fits) ctx.nodes.level(l) = std::move(nodes);
+  }
+  if (!fits) throw Error(Errc::corrupt, "the build checkpoint does not fit the volume it claims to be of");
+  return z;
+}
+
+/// What a build that starts from the beginning finds before it writes anything: the f32
+/// pre-pass (non-finite voxels and the value range), the background, and the histogram's bins.
+void prepare_fresh_build(VolumeSource& source, const BuildOptions& options, BuildContext& ctx, ScanResult& scan,
+                         Progress* progress) {
+  std::optional<ValueRange> range = source.value_range_hint();
+  if (source.may_contain_nonfinite() || (source.type() == ValueType::f32 && !range)) {
+    std::unique_ptr<Progress> scan_progress;
+    if (progress) scan_progress = std::make_unique<Progress>("scan", uint64_t(volume(source.dims())), "voxels");
+    scan = scan_source(source, scan_progress.get());
+    if (scan.nonfinite > 0 && options.nonfinite == NonFinite::reject)
+      throw Error(Errc::format, fmt::format("{} non-finite voxels (NaN or infinity), the first at ({}, {}, {}); "
+                                            "repair them with --nonfinite=zero or --nonfinite=clamp",
+                                            scan.nonfinite, scan.first.x, scan.first.y, scan.first.z))
+          .with_file(source.name());
+    if (!(scan.min <= scan.max)) scan.min = scan.max = 0;  // nothing finite at all
+    range = ValueRange{scan.min, scan.max};
+  }
+  ctx.background = options.background.value_or(source.background());
+  if (options.background_auto) ctx.background = estimate_background(source);
+  if (ctx.format.type == ValueType::f32) {
+    ValueRange r = range.value_or(ValueRange{0, 1});
+    if (options.clamp) r = {std::max(r.lo, options.clamp->first), std::min(r.hi, options.clamp->second)};
+    ctx.hist_range = r;
+    ctx.hist_bins = 256;
+  } else {
+    ctx.hist_range = {integer_min(ctx.format.type), integer_max(ctx.format.type)};
+    ctx.hist_bins = integer_count(ctx.format.type);
+  }
+}
+
+/// Input bytes of the first z finest slices, for progress in bytes of the source.
+uint64_t input_bytes_before(const VolumeSource& source, int64_t z) {
+  return uint64_t(double(source.input_bytes()) * double(z) / double(std::max<int64_t>(1, source.dims().z)));
+}
+
 template <typename T>
 void run_levels(VolumeSource& source, BuildContext& ctx, const BuildOptions& options, const ScanResult& scan,
-                Progress* progress) {
+                Progress* progress, const BuildIdentity& identity, StateReader* resume, int64_t z_start) {
   // Coarsest first in memory so each level can point at its coarser neighbour.
   std::vector<std::unique_ptr<Level<T>>> levels(size_t(ctx.layout.levels));
   for (int l = 0; l < ctx.layout.levels; ++l)
@@ -475,12 +592,38 @@ void run_levels(VolumeSource& source, BuildContext& ctx, const BuildOptions& opt
   Level<T>& finest = *levels.back();
   const Vec3s d = ctx.layout.dims;
   const size_t slice_bytes = size_t(finest.slice_voxels()) * sizeof(T);
-  for (int64_t z = 0; z < d.z; ++z) {
+  if (resume) {
+    for (auto& level : levels) level->restore(*resume);
+    if (!resume->done()) throw Error(Errc::corrupt, "the build checkpoint has bytes past its last level");
+    if (!source.can_skip()) {  // a stream (gzip) is read up to where the build stopped
+      std::vector<std::byte> discard(slice_bytes);
+      for (int64_t z = 0; z < z_start; ++z) source.read_slab(z, z + 1, discard);
+    }
+  }
+  // A checkpoint right after a finest row is written, when the finest ring holds least; at
+  // most every checkpoint_seconds, and never costing over 5% of the time since the last.
+  Stopwatch since_checkpoint;
+  double last_cost = 0;
+  int64_t rows = finest.rows_done();
+  for (int64_t z = z_start; z < d.z; ++z) {
     T* slot = finest.next_slot();
     source.read_slab(z, z + 1, {reinterpret_cast<std::byte*>(slot), slice_bytes});
     repair_slice(slot, finest.slice_voxels(), options, scan);
     finest.commit();
-    if (progress) progress->advance(uint64_t(finest.slice_voxels()));
+    if (progress) progress->advance(input_bytes_before(source, z + 1) - input_bytes_before(source, z));
+    if (finest.rows_done() == rows || z + 1 == d.z) continue;
+    rows = finest.rows_done();
+    const double cost = last_cost + ctx.writer->last_checkpoint_seconds();
+    const bool due = options.checkpoint_seconds == 0 ||
+                     since_checkpoint.seconds() >= std::max(options.checkpoint_seconds, 20 * cost);
+    if (!due) continue;
+    const Stopwatch watch;
+    StateWriter w;
+    save_common(w, identity, ctx, scan, z + 1);
+    for (const auto& level : levels) level->save(w);
+    ctx.writer->push_checkpoint(std::move(w.bytes()));
+    last_cost = watch.seconds();
+    since_checkpoint.restart();
   }
   finest.finish();
 }
@@ -501,145 +644,6 @@ void validate(const BuildOptions& o) {
 }
 
 }  // namespace
-
-namespace {
-
-namespace fs = std::filesystem;
-
-[[noreturn]] void fail_io(const std::string& what, const std::error_code& ec, const std::string& dir) {
-  throw Error(Errc::io, fmt::format("{}: {}", what, ec.message())).with_file(dir);
-}
-
-// A sibling a rebuild left behind is removed only when it holds a store (or nothing): a user's
-// directory of that name is not ours to delete.
-void remove_leftover(const std::string& path, const std::string& dir) {
-  std::error_code ec;
-  if (!fs::exists(fs::symlink_status(path, ec))) return;
-  if (probe_store(path) == StoreState::not_a_store)
-    throw Error(Errc::invalid_argument,
-                fmt::format("{} is in the way of rebuilding this store and is not a brickyard store; move it away", path))
-        .with_file(dir);
-  fs::remove_all(path, ec);
-  if (ec) fail_io(fmt::format("cannot remove {}", path), ec, dir);
-}
-
-bool same_file_system(const std::string& a, const std::string& b) {
-  struct stat sa {}, sb {};
-  return ::stat(a.c_str(), &sa) == 0 && ::stat(b.c_str(), &sb) == 0 && sa.st_dev == sb.st_dev;
-}
-
-/// Swaps two directories in one step; false where the file system cannot (the caller renames twice).
-bool exchange_directories(const std::string& a, const std::string& b, const std::string& dir) {
-#ifdef RENAME_EXCHANGE
-  if (::renameat2(AT_FDCWD, a.c_str(), AT_FDCWD, b.c_str(), RENAME_EXCHANGE) == 0) return true;
-  if (errno != EINVAL && errno != ENOSYS && errno != ENOTSUP)
-    throw Error(Errc::io, fmt::format("cannot swap {} into place: {}", a, std::strerror(errno))).with_file(dir);
-#endif
-  (void)a, (void)b, (void)dir;
-  return false;
-}
-
-}  // namespace
-
-StoreBuildTarget::StoreBuildTarget(const std::string& dir, const std::string& source_json, const std::string& build_json,
-                                   bool force, BuildResult& result, bool publish_whole)
-    : lock_(dir), dir_(dir), real_(resolved_store_path(dir)), path_(dir), rebuilding_(store_sibling(dir, "rebuilding")),
-      replaced_(store_sibling(dir, "replaced")) {
-  reclaim();
-  switch (probe_store(dir)) {
-    case StoreState::absent: break;
-    case StoreState::not_a_store:
-      throw Error(Errc::invalid_argument, "exists and is not a brickyard store; refusing to overwrite it").with_file(dir);
-    case StoreState::incomplete:
-      result.rebuilt_incomplete = true;
-      remove_store_files(dir);
-      break;
-    case StoreState::complete: {
-      const Manifest old = read_manifest(dir);
-      // The generator (what made a raw file, from its sidecar) describes the data but is not
-      // its identity: stores built before it was recorded stay up to date.
-      auto identity = [](const std::string& json) {
-        nlohmann::json j = nlohmann::json::parse(json);
-        if (j.is_object()) j.erase("generator");
-        return j.dump();
-      };
-      if (identity(old.source) == identity(source_json) && old.build == build_json && !force) {
-        result.manifest = old;
-        up_to_date_ = true;
-        return;
-      }
-      if (!force)
-        throw Error(Errc::invalid_argument,
-                    "a complete store from a different source or with different parameters is there; "
-                    "pass --force to rebuild it")
-            .with_file(dir);
-      if (!same_file_system(real_, fs::path(real_).parent_path().string())) {
-        remove_store_files(dir);  // a store that is a mount point of its own: no rename can cross
-        break;
-      }
-      beside_ = true;
-      path_ = rebuilding_;
-      break;
-    }
-  }
-  if (publish_whole && !beside_) {
-    std::error_code ec;
-    const fs::path parent = fs::path(real_).has_parent_path() ? fs::path(real_).parent_path() : fs::path(".");
-    fs::create_directories(parent, ec);
-    if (ec) fail_io("cannot create the store's directory", ec, dir_);
-    // Nothing there, or an incomplete store's directory that is not a mount point of its own.
-    if (!fs::exists(fs::symlink_status(real_, ec)) || same_file_system(real_, parent.string())) {
-      beside_ = true;
-      path_ = rebuilding_;
-    }
-  }
-}
-
-StoreBuildTarget::~StoreBuildTarget() {
-  if (!beside_ || committed_) return;
-  std::error_code ec;
-  fs::remove_all(rebuilding_, ec);  // else the next writer reclaims it
-}
-
-void StoreBuildTarget::reclaim() {
-  std::error_code ec;
-  if (fs::exists(fs::symlink_status(replaced_, ec))) {
-    if (fs::exists(fs::symlink_status(real_, ec))) {
-      remove_leftover(replaced_, dir_);
-    } else {
-      const bool rebuilt = probe_store(rebuilding_) == StoreState::complete;
-      fs::rename(rebuilt ? rebuilding_ : replaced_, real_, ec);
-      if (ec) fail_io(fmt::format("cannot put {} back in place", rebuilt ? rebuilding_ : replaced_), ec, dir_);
-      if (rebuilt) remove_leftover(replaced_, dir_);
-    }
-  }
-  remove_leftover(rebuilding_, dir_);
-}
-
-void StoreBuildTarget::commit() {
-  if (!beside_ || committed_) return;
-  std::error_code ec;
-  if (!fs::exists(fs::symlink_status(real_, ec))) {  // nothing there (publish_whole): it appears whole
-    fs::rename(rebuilding_, real_, ec);
-    if (ec) fail_io(fmt::format("cannot move {} into place", rebuilding_), ec, dir_);
-    committed_ = true;
-    return;
-  }
-  std::string old = rebuilding_;  // where the old store is once the new one is in place
-  if (!exchange_directories(rebuilding_, real_, dir_)) {
-    fs::rename(real_, replaced_, ec);
-    if (ec) fail_io(fmt::format("cannot move the old store aside to {}", replaced_), ec, dir_);
-    fs::rename(rebuilding_, real_, ec);
-    if (ec) {
-      std::error_code back;
-      fs::rename(replaced_, real_, back);
-      fail_io(fmt::format("cannot move {} into place", rebuilding_), ec, dir_);
-    }
-    old = replaced_;
-  }
-  committed_ = true;
-  fs::remove_all(old, ec);  // the new store is in place; a failure here is reclaimed next time
-}
 
 ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const BuildOptions& o, int threads) {
   const GridLayout layout = GridLayout::make(dims, o.brick_size);
@@ -710,24 +714,30 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   format.hc_level = options.hc_level;
   format.shuffle = options.shuffle;
 
-  // The f32 pre-pass, before anything is written: non-finite voxels and the value range.
+  BuildContext ctx(size_t(layout.levels));
+  ctx.format = format;
+  ctx.layout = layout;
+  ctx.nodes = NodeTable(layout);
+  ctx.downsample = options.downsample;
+  ctx.tolerance = options.constant_tolerance;
+  ctx.flatten_background_only = options.background.has_value() || options.background_auto;
+  const BuildIdentity identity{source_json, build_json};
   ScanResult scan;
-  std::optional<ValueRange> range = source.value_range_hint();
-  if (source.may_contain_nonfinite() || (source.type() == ValueType::f32 && !range)) {
-    std::unique_ptr<Progress> scan_progress;
-    if (progress) scan_progress = std::make_unique<Progress>("scan", uint64_t(volume(source.dims())), "voxels");
-    scan = scan_source(source, scan_progress.get());
-    if (scan.nonfinite > 0 && options.nonfinite == NonFinite::reject)
-      throw Error(Errc::format, fmt::format("{} non-finite voxels (NaN or infinity), the first at ({}, {}, {}); "
-                                            "repair them with --nonfinite=zero or --nonfinite=clamp",
-                                            scan.nonfinite, scan.first.x, scan.first.y, scan.first.z))
-          .with_file(source.name());
-    if (!(scan.min <= scan.max)) scan.min = scan.max = 0;  // nothing finite at all
-    range = ValueRange{scan.min, scan.max};
+  std::optional<StateReader> resume;
+  int64_t z_start = 0;
+  if (const auto& state = target.resume_state()) {
+    // An interrupted build of this same import: what its pre-passes found, its statistics and
+    // node table so far, and where it stopped come from its last checkpoint.
+    resume.emplace(*state);
+    try {
+      z_start = restore_common(*resume, ctx, scan);
+    } catch (Error& e) {
+      throw e.with_file(target.path());
+    }
+    result.resumed_at_slice = z_start;
+  } else {
+    prepare_fresh_build(source, options, ctx, scan, progress);
   }
-
-  double background = options.background.value_or(source.background());
-  if (options.background_auto) background = estimate_background(source);
 
   Manifest manifest;
   manifest.dims = layout.dims;
@@ -735,27 +745,9 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   manifest.origin = source.origin();
   manifest.format = format;
   manifest.levels = layout.levels;
-  manifest.background = background;
+  manifest.background = ctx.background;
   manifest.source = nlohmann::json::parse(source_json).dump();
   manifest.build = build_json;
-
-  BuildContext ctx(size_t(layout.levels));
-  ctx.format = format;
-  ctx.layout = layout;
-  ctx.nodes = NodeTable(layout);
-  ctx.downsample = options.downsample;
-  ctx.tolerance = options.constant_tolerance;
-  ctx.background = background;
-  ctx.flatten_background_only = options.background.has_value() || options.background_auto;
-  if (format.type == ValueType::f32) {
-    ValueRange r = range.value_or(ValueRange{0, 1});
-    if (options.clamp) r = {std::max(r.lo, options.clamp->first), std::min(r.hi, options.clamp->second)};
-    ctx.hist_range = r;
-    ctx.hist_bins = 256;
-  } else {
-    ctx.hist_range = {integer_min(format.type), integer_max(format.type)};
-    ctx.hist_bins = integer_count(format.type);
-  }
 
   lmdb::EnvOptions env;
   const uint64_t raw_bytes = uint64_t(volume(layout.dims)) * size_of(format.type);
@@ -763,13 +755,29 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   env.growth = options.map_growth;
   env.max_map_size = options.map_growth ? uint64_t(1) << 44 : env.map_size;
   env.no_sync = true;  // the final transaction syncs everything before it
-  auto store = std::make_unique<StoreWriter>(target.path(), manifest, env, options.batch_bytes);
+  auto store = resume ? StoreWriter::reopen(target.path(), env, options.batch_bytes)
+                      : std::make_unique<StoreWriter>(target.path(), manifest, env, options.batch_bytes);
+  if (progress && z_start > 0) progress->start_at(input_bytes_before(source, z_start));
   {
     RecordWriter writer(*store, size_t(64) << 20);
     ctx.writer = &writer;
-    dispatch_value_type(format.type, [&](auto tag) { run_levels<decltype(tag)>(source, ctx, options, scan, progress); });
+    try {
+      dispatch_value_type(format.type, [&](auto tag) {
+        run_levels<decltype(tag)>(source, ctx, options, scan, progress, identity, resume ? &*resume : nullptr, z_start);
+      });
+    } catch (...) {
+      // A source that fails (a read error, a damaged stream) after hours of work: the
+      // checkpoints already queued are committed, so that the rerun resumes from the last.
+      try {
+        writer.close();
+      } catch (...) {
+      }
+      throw;
+    }
     writer.close();
   }
+  resume.reset();
+  target.resume_state().reset();  // its slices are no longer needed
 
   // Manifest: value range from the finest node ranges (they cover every voxel), histogram,
   // per-level statistics.
@@ -780,9 +788,7 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
     manifest.min_value = std::min(manifest.min_value, double(n.min));
     manifest.max_value = std::max(manifest.max_value, double(n.max));
   }
-  std::vector<uint64_t> fine(ctx.hist_bins, 0);
-  for (const auto& h : ctx.histograms)
-    for (size_t i = 0; i < h.size(); ++i) fine[i] += h[i];
+  const std::vector<uint64_t> fine = ctx.histogram();
   manifest.histogram.counts.assign(256, 0);
   if (format.type == ValueType::f32) {
     manifest.histogram.lo = ctx.hist_range.lo;

@@ -10,6 +10,7 @@
 /// and compressed in parallel (TBB); a writer thread commits them to LMDB in batches. The
 /// store claims to be complete only in its very last transaction.
 
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -64,6 +65,10 @@ struct BuildOptions {
   /// Refuse to start when the free disk is below the store's worst case (estimate_build_needs);
   /// off for data known to compress well. Memory is always checked.
   bool check_disk = true;
+  /// At most this many seconds between checkpoints of the build's state (at finest brick-row
+  /// boundaries), from which a killed import resumes; a checkpoint waits longer when it would
+  /// cost over 5% of the time since the last. 0: after every brick row (tests, crash drills).
+  double checkpoint_seconds = 5.0;
   /// Also build the octree volume (import --octree), before the store is put in place: the
   /// store is built beside its path and appears there only with its octree, never as a
   /// complete grid without the octree asked for.
@@ -74,6 +79,8 @@ struct BuildResult {
   Manifest manifest;
   bool up_to_date = false;  ///< nothing was done: the store was complete and identical
   bool rebuilt_incomplete = false;
+  /// The finest slices an interrupted build had done when this one resumed it (0: from the start).
+  int64_t resumed_at_slice = 0;
   double seconds = 0;          ///< the bricks' build
   double octree_seconds = 0;   ///< BuildOptions::octree's build, when asked for
   uint64_t input_bytes = 0;
@@ -97,8 +104,9 @@ std::vector<std::string> value_range_warnings(double min_value, double max_value
 /// live build for an interrupted one. It reclaims what a killed rebuild left beside the store
 /// (below), then decides by what is at `dir`:
 /// - nothing (or an empty directory): built in place;
-/// - an incomplete store, which with the lock held is an interrupted build: removed
-///   (result.rebuilt_incomplete), built in place;
+/// - an incomplete store, which with the lock held is an interrupted build: resumed from its
+///   last checkpoint when that is of the same source and parameters (resume_state(); not with
+///   publish_whole), else removed (result.rebuilt_incomplete) and built in place;
 /// - a complete store from the same source and parameters: left alone (up_to_date(),
 ///   result.manifest is its manifest) unless `force`;
 /// - another complete store: refused without `force`; with it, rebuilt beside: path() is
@@ -125,6 +133,9 @@ class StoreBuildTarget {
   StoreBuildTarget& operator=(const StoreBuildTarget&) = delete;
 
   bool up_to_date() const { return up_to_date_; }
+  /// @brief The state of an interrupted build of this same import found in place (an incomplete
+  /// store whose checkpoint has the same source and parameters): the build resumes from it.
+  std::optional<std::vector<std::byte>>& resume_state() { return resume_state_; }
   /// @brief The directory to build in: `dir`, or the rebuild beside it.
   const std::string& path() const { return path_; }
   /// @brief The store's write lock, held until this target is destroyed.
@@ -139,6 +150,7 @@ class StoreBuildTarget {
   StoreWriteLock lock_;
   std::string dir_, real_, path_, rebuilding_, replaced_;
   bool up_to_date_ = false, beside_ = false, committed_ = false;
+  std::optional<std::vector<std::byte>> resume_state_;
 };
 
 /// @brief What build_store needs for a grid of `dims` `type` values with `options`, on

@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include <fmt/format.h>
+#include <lz4.h>
 #include <xxhash.h>
 
 #include "core/error.h"
@@ -21,6 +22,10 @@ const std::string kManifestKey = "manifest";
 // The XXH3-64 of the manifest's text, little-endian, beside it: a flipped bit in the manifest
 // would otherwise be read as another volume (other dims, spacing or value range).
 const std::string kManifestChecksumKey = "manifest.xxh3";
+// An interrupted build's state, beside the manifest of the incomplete store it is building.
+const std::string kCheckpointKey = "build.checkpoint";
+constexpr uint32_t kCheckpointMagic = 0x4b435942;  // "BYCK"
+constexpr size_t kCheckpointChunk = size_t(64) << 20;  // LZ4 takes at most 2 GiB at once
 // Table chunks (node table, octree page table, cluster table, time-step ranges) end in the
 // XXH3-64 of their records, little-endian: a flipped bit in a node's range would otherwise skip
 // its brick or draw a constant that is not there, unseen. Chunks without it (stores written
@@ -220,6 +225,38 @@ Manifest read_manifest(const std::string& dir) {
   const auto db = env->open_database(kManifestDb, false);
   const lmdb::ReadTxn txn(*env);
   return load_manifest(txn, db, dir);
+}
+
+// Checkpoint record: magic, raw size (u64), XXH3-64 of the raw bytes, then chunks of at most
+// kCheckpointChunk raw bytes, each its raw and compressed sizes (u32) and its LZ4 block.
+std::optional<std::vector<std::byte>> read_build_checkpoint(const std::string& dir) {
+  auto env = open_existing(dir);
+  const auto db = env->open_database(kManifestDb, false);
+  const lmdb::ReadTxn txn(*env);
+  const auto rec = txn.get(db, lmdb::as_bytes(kCheckpointKey));
+  if (!rec || rec->size() < 20) return std::nullopt;
+  const std::byte* p = rec->data();
+  const std::byte* end = p + rec->size();
+  uint32_t magic = 0;
+  uint64_t raw = 0, sum = 0;
+  std::memcpy(&magic, p, 4), std::memcpy(&raw, p + 4, 8), std::memcpy(&sum, p + 12, 8);
+  p += 20;
+  if (magic != kCheckpointMagic || raw > (uint64_t(1) << 40)) return std::nullopt;
+  std::vector<std::byte> out(raw);
+  uint64_t at = 0;
+  while (at < raw) {
+    uint32_t n = 0, c = 0;
+    if (end - p < 8) return std::nullopt;
+    std::memcpy(&n, p, 4), std::memcpy(&c, p + 4, 4);
+    p += 8;
+    if (n > raw - at || c > uint64_t(end - p)) return std::nullopt;
+    const int got = LZ4_decompress_safe(reinterpret_cast<const char*>(p), reinterpret_cast<char*>(out.data() + at),
+                                        int(c), int(n));
+    if (got != int(n)) return std::nullopt;
+    p += c, at += n;
+  }
+  if (p != end || XXH3_64bits(out.data(), out.size()) != sum) return std::nullopt;
+  return out;
 }
 
 Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
@@ -569,6 +606,37 @@ StoreWriter::StoreWriter(const std::string& dir, const Manifest& initial, const 
 
 StoreWriter::~StoreWriter() = default;
 
+std::unique_ptr<StoreWriter> StoreWriter::reopen(const std::string& dir, const lmdb::EnvOptions& options,
+                                                 uint64_t batch_bytes) {
+  std::unique_ptr<StoreWriter> w(new StoreWriter());
+  w->env_ = std::make_unique<lmdb::Env>(dir, options);
+  w->manifest_db_ = w->env_->open_database(kManifestDb, false);
+  w->nodes_db_ = w->env_->open_database(kNodesDb, true);
+  w->bricks_db_ = w->env_->open_database(kBricksDb, true);
+  w->writer_ = std::make_unique<lmdb::BatchWriter>(*w->env_, batch_bytes);
+  return w;
+}
+
+void StoreWriter::put_checkpoint(std::span<const std::byte> state) {
+  std::vector<std::byte> rec(20);
+  const uint32_t magic = kCheckpointMagic;
+  const uint64_t raw = state.size(), sum = XXH3_64bits(state.data(), state.size());
+  std::memcpy(rec.data(), &magic, 4), std::memcpy(rec.data() + 4, &raw, 8), std::memcpy(rec.data() + 12, &sum, 8);
+  for (size_t at = 0; at < state.size(); at += kCheckpointChunk) {
+    const uint32_t n = uint32_t(std::min(kCheckpointChunk, state.size() - at));
+    const size_t head = rec.size();
+    rec.resize(head + 8 + size_t(LZ4_compressBound(int(n))));
+    const int c = LZ4_compress_default(reinterpret_cast<const char*>(state.data() + at),
+                                       reinterpret_cast<char*>(rec.data() + head + 8), int(n), LZ4_compressBound(int(n)));
+    if (c <= 0) throw Error(Errc::internal, "LZ4 compression of the build checkpoint failed").with_file(env_->path());
+    const uint32_t cs = uint32_t(c);
+    std::memcpy(rec.data() + head, &n, 4), std::memcpy(rec.data() + head + 4, &cs, 4);
+    rec.resize(head + 8 + cs);
+  }
+  writer_->put(manifest_db_, lmdb::as_bytes(kCheckpointKey), std::move(rec));
+  writer_->commit();
+}
+
 void StoreWriter::put_brick(const BrickKey& key, std::vector<std::byte>&& record) {
   BY_CHECK(kind_ == DataKind::structured);
   writer_->put(bricks_db_, brick_key_bytes(key), std::move(record));
@@ -623,9 +691,11 @@ void StoreWriter::finish(const Manifest& final_manifest, const std::vector<TetCl
 
 void StoreWriter::commit_final(Manifest m) {
   m.complete = true;
-  // One transaction: the table and the complete flag appear together or not at all.
+  // One transaction: the table and the complete flag appear together or not at all, and the
+  // checkpoint of a resumed build goes with them.
   const std::string text = m.to_json();
   put_manifest(*writer_, manifest_db_, text);
+  writer_->erase(manifest_db_, lmdb::as_bytes(kCheckpointKey));
   env_->set_no_sync(false);
   writer_->commit();
 }

@@ -142,6 +142,15 @@ class StoreWriter {
               uint64_t batch_bytes = uint64_t(32) << 20);
   ~StoreWriter();
 
+  /// @brief Reopens the incomplete grid store a killed build left, to resume it from its last
+  /// checkpoint: its manifest stays incomplete until finish().
+  static std::unique_ptr<StoreWriter> reopen(const std::string& dir, const lmdb::EnvOptions& options,
+                                             uint64_t batch_bytes = uint64_t(32) << 20);
+  /// @brief Commits everything put so far and, in the same transaction, the build's state
+  /// (LZ4-compressed, checksummed, opaque here): a killed build resumes from the last one.
+  /// finish() removes it in the last transaction.
+  void put_checkpoint(std::span<const std::byte> state);
+
   /// @brief A grid store's encoded brick record (encode_brick).
   void put_brick(const BrickKey& key, std::vector<std::byte>&& record);
   /// @brief A tetrahedral store's cluster page (its used bytes; encoded here).
@@ -157,9 +166,10 @@ class StoreWriter {
   uint64_t bytes_written() const { return writer_->committed_bytes() + writer_->pending_bytes(); }
 
  private:
+  StoreWriter() = default;
   void commit_final(Manifest m);
 
-  DataKind kind_;
+  DataKind kind_ = DataKind::structured;
   std::unique_ptr<lmdb::Env> env_;
   lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_;
   std::unique_ptr<lmdb::BatchWriter> writer_;
@@ -189,5 +199,9 @@ class OctreeWriter {
 
 /// @brief Reads the manifest of a store without loading anything else (allowing incomplete).
 Manifest read_manifest(const std::string& dir);
+
+/// @brief The build state of an incomplete store's last checkpoint (StoreWriter::put_checkpoint),
+/// decoded; nullopt when it has none, or one that fails its checksum (the build then starts over).
+std::optional<std::vector<std::byte>> read_build_checkpoint(const std::string& dir);
 
 }  // namespace brickyard

@@ -25,6 +25,19 @@ TEST(Progress, LinesReportPercentRateAndEta) {
   EXPECT_EQ(s.find("500 voxels in"), s.rfind("500 voxels in"));
 }
 
+TEST(Progress, AResumedTaskCountsEarlierWorkAsDoneButNotInItsRate) {
+  std::ostringstream out;
+  {
+    Progress p("import", 1000, "B", {ProgressStyle::lines, &out, 0.0, 0.0});
+    p.start_at(900);
+    p.advance(50);
+  }
+  const std::string s = out.str();
+  EXPECT_NE(s.find("import: 95% (950 B of 1000 B)"), std::string::npos) << s;
+  // The closing line is this run's work, and its rate is of that alone.
+  EXPECT_NE(s.find("import: 50 B in"), std::string::npos) << s;
+}
+
 TEST(Progress, BarRedrawsInPlace) {
   std::ostringstream out;
   Progress p("import", 10, "bricks", {ProgressStyle::bar, &out, 0.0, 0.0});

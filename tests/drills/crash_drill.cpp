@@ -101,10 +101,11 @@ int main(int argc, char** argv) {
   const std::string size = argc > 4 ? argv[4] : "512", type = argc > 5 ? argv[5] : "f32";
   fs::remove_all(work);
   fs::create_directories(work);
-  // Small transactions: a build of many commits, so that kills land in and between them.
+  // Small transactions: a build of many commits, so that kills land in and between them; a
+  // checkpoint after every row of bricks, so that most kills leave one to resume from.
   const auto import_args = [&](const std::string& field, const std::string& out, bool force) {
     std::vector<std::string> a = {by, "-q", "import", field, "--size", size, "--type", type, "--brick-size", "32",
-                                  "--transaction-size", "1MiB", "--out", out};
+                                  "--transaction-size", "1MiB", "--checkpoint-every", "0", "--out", out};
     if (force) a.push_back("--force");
     return a;
   };
@@ -142,7 +143,7 @@ int main(int argc, char** argv) {
     return ok;
   };
   for (bool force : {false, true}) {
-    int killed = 0, resumed = 0, kept_old = 0, took_new = 0;
+    int killed = 0, resumed = 0, kept_old = 0, took_new = 0, from_checkpoint = 0;
     double rerun_seconds = 0;
     for (double f : points) {
       const std::string store = work + "/store";
@@ -168,17 +169,18 @@ int main(int argc, char** argv) {
       started = Clock::now();
       const Run r = run(command(args));
       rerun_seconds += seconds_since(started);
+      from_checkpoint += r.output.find("resumed an interrupted build") != std::string::npos;
       if (!check(what, r.status == 0, "the rerun failed:\n" + r.output)) continue;
       const Run v = run(by + " -q verify " + store);
       if (!check(what, v.status == 0, "verify after the rerun:\n" + v.output)) continue;
       resumed += check(what, records(store) == expected, "the rerun's records differ from the uninterrupted build's");
     }
     std::cout << fmt::format("{}: {} kill points, {} killed mid-build, {} reruns verified and equal to the uninterrupted "
-                             "build{}; reruns {:.2f} s on average\n",
+                             "build{}, {} resumed from a checkpoint; reruns {:.2f} s on average\n",
                              force ? "--force rebuilds" : "builds", points.size(), killed, resumed,
                              force ? fmt::format(" (after the kill: {} kept the old store whole, {} had the new one)", kept_old, took_new)
                                    : "",
-                             rerun_seconds / double(points.size()));
+                             from_checkpoint, rerun_seconds / double(points.size()));
   }
   std::cout << (failures ? fmt::format("{} failures\n", failures) : std::string("all kills recovered\n"));
   return failures ? 1 : 0;
