@@ -54,8 +54,12 @@ struct ImportOptions {
   std::vector<std::string> params;
   // vdb
   std::string grid;
-  // NIfTI
+  // NIfTI and netCDF
   std::optional<int64_t> time_step;
+  // netCDF
+  std::string variable;
+  // DICOM
+  std::string series;
   // build
   int brick_size = 32, apron = 1, hc_level = 9;
   std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size, transaction_size;
@@ -71,6 +75,13 @@ bool has_extension(const std::string& path, std::initializer_list<const char*> e
   std::string ext = fs::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
   return std::any_of(exts.begin(), exts.end(), [&](const char* e) { return ext == e; });
+}
+
+/// Whether `path` names a DICOM series: a directory (of slice files), or a .dcm file (one slice,
+/// or a multi-frame volume).
+bool is_dicom_path(const std::string& path) {
+  std::error_code ec;
+  return fs::is_directory(path, ec) || has_extension(path, {".dcm"});
 }
 
 /// Whether `path` names a NIfTI file: .nii or .hdr, gzip-compressed or not (extension() sees
@@ -102,7 +113,10 @@ std::unique_ptr<VolumeSource> open_source(const ImportOptions& o) {
           .with_field("--convert");
     convert.accept_rounding = true;
   }
+  if (is_dicom_path(o.source)) return open_dicom_source(o.source, DicomOptions{o.series, convert});
   if (is_nifti_path(o.source)) return open_nifti_source(o.source, NiftiOptions{convert, o.time_step});
+  if (has_extension(o.source, {".nc", ".nc4", ".cdf"}))
+    return open_netcdf_source(o.source, NetcdfOptions{o.variable, o.time_step, convert});
   if (has_extension(o.source, {".nrrd", ".nhdr"})) return open_nrrd_source(o.source, convert);
   if (has_extension(o.source, {".mhd", ".mha"})) return open_metaimage_source(o.source, convert);
   if (has_extension(o.source, {".vdb"})) return open_vdb_source(o.source, o.grid);
@@ -167,10 +181,14 @@ void refuse_options_for_other_sources(const ImportOptions& o) {
   const bool nrrd = !mesh_file && has_extension(src, {".nrrd", ".nhdr"}), vdb = !mesh_file && has_extension(src, {".vdb"});
   const bool metaimage = !mesh_file && has_extension(src, {".mhd", ".mha"});
   const bool nifti = !mesh_field && !mesh_file && !field && is_nifti_path(src);
-  const bool raw = !mesh_field && !mesh_file && !field && !nrrd && !metaimage && !nifti && !vdb;
+  const bool netcdf = !mesh_field && !mesh_file && !field && !nifti && has_extension(src, {".nc", ".nc4", ".cdf"});
+  const bool dicom = !mesh_field && !mesh_file && !field && is_dicom_path(src);
+  const bool raw = !mesh_field && !mesh_file && !field && !nrrd && !metaimage && !nifti && !netcdf && !vdb && !dicom;
   const std::string kind = mesh_field ? "a mesh:FIELD source" : mesh_file ? "a mesh file" : field ? "a field: source"
                            : nrrd     ? "a NRRD file"          : metaimage ? "a MetaImage file"
-                           : nifti    ? "a NIfTI file"         : vdb       ? "an OpenVDB file" : "a raw file";
+                           : dicom    ? "a DICOM series"
+                           : nifti    ? "a NIfTI file"         : netcdf    ? "a netCDF file"
+                           : vdb      ? "an OpenVDB file"      : "a raw file";
   static const std::set<std::string> raw_only = {"--dims", "--endian", "--header-bytes", "--spacing", "--origin"};
   static const std::set<std::string> mesh_field_only = {"--cells", "--jitter", "--replicate", "--steps", "--move"};
   static const std::set<std::string> mesh_file_only = {"--array", "--single-step"};
@@ -180,8 +198,10 @@ void refuse_options_for_other_sources(const ImportOptions& o) {
     if (opt == "--out") continue;
     if (raw_only.count(opt)) applies = raw;
     else if (opt == "--type") applies = raw || field;
-    else if (opt == "--convert") applies = raw || nrrd || metaimage || nifti;
-    else if (opt == "--time-step") applies = nifti;
+    else if (opt == "--convert") applies = raw || nrrd || metaimage || nifti || netcdf || dicom;
+    else if (opt == "--series") applies = dicom;
+    else if (opt == "--time-step") applies = nifti || netcdf;
+    else if (opt == "--variable") applies = netcdf;
     else if (opt == "--size") applies = field;
     else if (opt == "--set") applies = field || mesh_field;
     else if (opt == "--grid") applies = vdb;
@@ -210,6 +230,8 @@ void run_import(const ImportOptions& o) {
     return run_mesh_import(m);
   }
   auto source = open_source(o);
+  // A DICOM directory may hold several series: say which one is imported, and the others.
+  if (is_dicom_path(o.source)) std::cout << nlohmann::json::parse(source->describe_json()).value("summary", "") << "\n";
   BuildOptions b;
   b.brick_size = o.brick_size;
   b.apron = o.apron;
@@ -221,6 +243,9 @@ void run_import(const ImportOptions& o) {
   b.downsample = parse_downsample(o.downsample);
   b.nonfinite = parse_nonfinite(o.nonfinite);
   b.constant_tolerance = o.constant_tolerance;
+  if (!(o.checkpoint_seconds >= 0))
+    throw Error(Errc::invalid_argument, "the time between checkpoints must be at least 0").with_field("--checkpoint-every");
+  b.checkpoint_seconds = o.checkpoint_seconds;
   if (o.background == "auto") b.background_auto = true;
   else if (!o.background.empty()) b.background = parse_number(o.background, "--background");
   if (!o.range.empty()) b.clamp = parse_range(o.range, "--range");
@@ -243,10 +268,10 @@ void run_import(const ImportOptions& o) {
     if (octree_missing) run_build_octree(o.out, {});
     return;
   }
-  if (!(o.checkpoint_seconds >= 0))
-    throw Error(Errc::invalid_argument, "the time between checkpoints must be at least 0").with_field("--checkpoint-every");
-  b.checkpoint_seconds = o.checkpoint_seconds;
   if (r.rebuilt_incomplete) std::cout << "an interrupted earlier build was discarded and rebuilt\n";
+  if (r.resumed_at_slice > 0)
+    std::cout << fmt::format("resumed an interrupted build of the same import at slice {} of {} ({:.0f}% done before)\n",
+                             r.resumed_at_slice, d.z, 100.0 * double(r.resumed_at_slice) / double(d.z));
   std::cout << fmt::format("wrote {}: {} levels, {} of bricks from {} of input ({:.2f}x) in {} ({}/s)\n", o.out,
                            r.manifest.levels, format_bytes(double(r.stored_bytes)), format_bytes(double(r.input_bytes)),
                            double(r.input_bytes) / std::max<double>(1, double(r.stored_bytes)), format_duration(r.seconds),
@@ -269,9 +294,6 @@ std::string sparkline(const Histogram& h, int width) {
   std::vector<double> cols(size_t(width), 0);
   for (size_t i = 0; i < h.counts.size(); ++i) cols[i * size_t(width) / h.counts.size()] += double(h.counts[i]);
   double mx = *std::max_element(cols.begin(), cols.end());
-  if (r.resumed_at_slice > 0)
-    std::cout << fmt::format("resumed an interrupted build of the same import at slice {} of {} ({:.0f}% done before)\n",
-                             r.resumed_at_slice, d.z, 100.0 * double(r.resumed_at_slice) / double(d.z));
   std::string out;
   for (double c : cols) {
     // Log scale: volume histograms are dominated by the background bin.
@@ -516,7 +538,8 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     auto* cmd = app.add_subcommand("import", "Build a multiresolution brick store from a volume");
     cmd->add_option("SOURCE", o->source,
                     "A raw file (described by FILE.json or --dims/--type), a .nrrd/.nhdr file, a MetaImage "
-                    ".mhd/.mha file, a NIfTI .nii/.nii.gz/.hdr file, a .vdb file, "
+                    ".mhd/.mha file, a NIfTI .nii/.nii.gz/.hdr file, a netCDF .nc/.nc4/.cdf file, a DICOM series "
+                    "(a directory of slices, or a .dcm file), a .vdb file, "
                     "field:NAME for a procedural field; a mesh (.vtu .pvd .vtk .msh .node/.ele), or mesh:FIELD "
                     "for a procedural tetrahedral mesh")
         ->required();
@@ -528,8 +551,8 @@ void add_store_commands(CLI::App& app, int& exit_status) {
                     "as f32: integers beyond 2^24 need --convert f32, doubles report their rounding)")
         ->group(raw);
     cmd->add_option("--convert", o->convert,
-                    "Raw, NRRD, MetaImage or NIfTI: f32 accepts the rounding of 32-bit integers beyond 2^24 (the "
-                    "worst error is reported)")
+                    "Raw, NRRD, MetaImage, NIfTI, netCDF or DICOM: f32 accepts the rounding of 32-bit integers "
+                    "beyond 2^24 (the worst error is reported)")
         ->group(raw);
     cmd->add_option("--endian", o->endian, "Raw: little or big")->capture_default_str()->group(raw);
     cmd->add_option("--header-bytes", o->header_bytes, "Raw: bytes to skip before the data")->group(raw);
@@ -540,9 +563,16 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("--set", o->params, "Field: parameter NAME=VALUE (repeatable)")->group(field);
     cmd->add_option("--grid", o->grid, "OpenVDB: grid name (default: the only grid)")->group("OpenVDB input");
     cmd->add_option("--time-step", o->time_step,
-                    "NIfTI: which volume of a 4D file to import (0-based; a 4D file needs it, a store holds one "
-                    "volume)")
+                    "NIfTI or netCDF: which volume of a 4D file or (time, z, y, x) variable to import (0-based; "
+                    "needed where there are several, a store holds one volume)")
         ->group("NIfTI input");
+    cmd->add_option("--variable", o->variable,
+                    "netCDF: the variable to import (default: the only 3D or 4D numeric variable)")
+        ->group("netCDF input");
+    cmd->add_option("--series", o->series,
+                    "DICOM: the SeriesInstanceUID of the series to import (default: the largest in the directory; "
+                    "the import names the others)")
+        ->group("DICOM input");
     auto* mesh = "Mesh input";
     cmd->add_option("--array", o->mesh.array,
                     "Mesh: the point array to import, or the name of a series NAME_0, NAME_1 ... (time steps); "
@@ -589,6 +619,11 @@ void add_store_commands(CLI::App& app, int& exit_status) {
                     "Bricks committed per LMDB transaction, e.g. 1MiB (default 32MiB; small ones let crash drills "
                     "land kills mid-commit)")
         ->group(build);
+    cmd->add_option("--checkpoint-every", o->checkpoint_seconds,
+                    "Seconds between checkpoints a killed import resumes from when run again (at most; a "
+                    "checkpoint costing over 5% of the time waits longer); 0: after every row of bricks")
+        ->capture_default_str()
+        ->group(build);
     cmd->add_flag("--octree", o->octree, "Also build the octree volume (lossless; see build-octree for its options)")
         ->group(build);
     cmd->add_flag("--force", o->force,
@@ -619,11 +654,6 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("STORE", *path, "Store directory")->required();
     cmd->callback([path, &exit_status] { exit_status = run_verify(*path); });
   }
-    cmd->add_option("--checkpoint-every", o->checkpoint_seconds,
-                    "Seconds between checkpoints a killed import resumes from when run again (at most; a "
-                    "checkpoint costing over 5% of the time waits longer); 0: after every row of bricks")
-        ->capture_default_str()
-        ->group(build);
   {
     struct ExportOptions {
       std::string store, box, out, grid, encoding;

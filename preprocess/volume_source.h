@@ -97,6 +97,41 @@ struct NiftiOptions {
 std::unique_ptr<VolumeSource> open_nifti_source(const std::string& path, const NiftiOptions& options = {});
 /// @brief Whether this build can read NIfTI files (nifticlib was found).
 bool nifti_support();
+/// @brief How a DICOM series is read.
+struct DicomOptions {
+  /// SeriesInstanceUID of the series to import (`--series`); empty: the largest in the directory.
+  std::string series_uid;
+  ConvertOptions convert;
+};
+/// @brief A DICOM series: a directory of slice files (searched recursively; files that are not
+/// DICOM images are skipped), or one multi-frame file, through GDCM. Slices are sorted along the
+/// normal of ImageOrientationPatient by ImagePositionPatient and must be evenly spaced, of one
+/// size, pixel format and orientation; x/y spacing from PixelSpacing, origin the first slice's
+/// position. RescaleSlope/Intercept are applied (whole results stay integers where they fit,
+/// else f32); the orientation is recorded in the provenance, not applied. Pixels are decoded one
+/// file at a time as slabs are read. The provenance names the series chosen and the others.
+std::unique_ptr<VolumeSource> open_dicom_source(const std::string& path, const DicomOptions& options = {});
+/// @brief Whether this build can read DICOM series (GDCM was found).
+bool dicom_support();
+/// @brief How a netCDF file is read.
+struct NetcdfOptions {
+  /// The variable to import (`--variable`); empty: the file's only 3D or 4D numeric variable.
+  std::string variable;
+  /// Which time step of a (time, z, y, x) variable (0-based, `--time-step`); needed when it has
+  /// several.
+  std::optional<int64_t> time_step;
+  ConvertOptions convert;
+};
+/// @brief One variable of a netCDF file (classic, 64-bit offset or data, netCDF-4), read slab by
+/// slab with nc_get_vara: (z, y, x), or one step of (time, z, y, x). byte, ubyte, short, ushort
+/// and float are stored as they are; int, uint and double convert to f32 (measured first, as raw
+/// files). CF scale_factor/add_offset are applied (integer results stay integers where they fit,
+/// else f32); voxels at _FillValue or missing_value become the source's background, a value just
+/// below the valid data, so that wholly missing bricks are stored empty. Spacing and origin come
+/// from uniform, increasing coordinate variables (else 1 and 0).
+std::unique_ptr<VolumeSource> open_netcdf_source(const std::string& path, const NetcdfOptions& options = {});
+/// @brief Whether this build can read netCDF files (netCDF-C was found).
+bool netcdf_support();
 /// @brief Whether this build can read OpenVDB files.
 bool vdb_support();
 /// @brief One grid of an OpenVDB file (float, double or int32; level set or fog volume).

@@ -7,7 +7,7 @@ set -euo pipefail
 packages=(
   cmake g++ ninja-build pkg-config ccache
   liblmdb-dev lmdb-utils liblz4-dev
-  libopenvdb-dev libboost-iostreams-dev libnifti2-dev
+  libopenvdb-dev libboost-iostreams-dev libnifti2-dev libnetcdf-dev libgdcm-dev
   libtbb-dev libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libfmt-dev libxxhash-dev zlib1g-dev libexpat1-dev libabsl-dev
   gnuplot-nox

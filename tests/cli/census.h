@@ -74,7 +74,7 @@ struct Case {
 /// The areas, in the census's order, with their headings.
 inline const std::vector<std::pair<std::string, std::string>> kAreas = {
     {"cli", "Command line and generate"},
-    {"import", "Importers: raw files, sidecars, NRRD, MetaImage, NIfTI, OpenVDB"},
+    {"import", "Importers: raw files, sidecars, NRRD, MetaImage, NIfTI, DICOM, netCDF, OpenVDB"},
     {"scene", "Scenes"},
     {"render", "render and bench options"},
     {"store", "Stores: info, verify, export, build-octree"},

@@ -372,8 +372,9 @@ void add_nrrd_and_vdb_cases(std::vector<Case>& c) {
   c.push_back({"import", "raw file is a FIFO", [](const Workspace& ws) { ASSERT_EQ(::mkfifo(ws.file("fifo.raw").c_str(), 0600), 0); },
                "brickyard import $TMP/fifo.raw --dims 4 --type u8 --out $TMP/i.store", 1,
                "$TMP/fifo.raw: is a FIFO, not a file: inputs are read from regular files"});
-  c.push_back({"import", "raw file is a directory", {}, "brickyard import $TMP/plain --dims 4 --type u8 --out $TMP/i.store", 1,
-               "$TMP/plain: is a directory, not a file"});
+  c.push_back({"import", "raw options for a directory (a DICOM series)", {},
+               "brickyard import $TMP/plain --dims 4 --type u8 --out $TMP/i.store", 2,
+               "field '--dims': does not apply to a DICOM series ($TMP/plain), and would be ignored"});
   c.push_back({"import", "--header-bytes overflow a size", {},
                "brickyard import " + raw16 + " --header-bytes 18446744073709551615 --out $TMP/i.store", 2,
                "field '--header-bytes': a 18446744073709551615-byte header and 4096 bytes of voxels overflow a 64-bit size"});
@@ -425,6 +426,40 @@ void add_nrrd_and_vdb_cases(std::vector<Case>& c) {
                "$SRC/tests/data/nifti/complex64.nii: field 'datatype': datatype 32 (COMPLEX64) is not supported"});
   c.push_back({"import", "NIfTI: 4D without --time-step", {}, "brickyard import $SRC/tests/data/nifti/4d.nii --out $TMP/i.store", 2,
                "$SRC/tests/data/nifti/4d.nii: field '--time-step': the file holds 3 time steps (dim[4])"});
+#endif
+
+  // DICOM: series pydicom wrote (tests/data/dicom/), or a directory of other files. Without GDCM
+  // every DICOM series is refused alike, so the cases need it.
+#if BRICKYARD_HAVE_DICOM
+  c.push_back({"import", "DICOM: no DICOM files in a directory",
+               [](const Workspace& ws) {
+                 fs::create_directory(ws.file("notdicom"));
+                 ws.write("notdicom/readme.txt", "not a DICOM file\n");
+               },
+               "brickyard import $TMP/notdicom --out $TMP/i.store", 1,
+               "$TMP/notdicom: no DICOM files in this directory: it holds 1 file that is not DICOM (readme.txt)"});
+  c.push_back({"import", "DICOM: irregular slice spacing", {}, "brickyard import $SRC/tests/data/dicom/irregular --out $TMP/i.store", 1,
+               "$SRC/tests/data/dicom/irregular: field 'ImagePositionPatient': irregular slice spacing: the gap between "
+               "irr_2.dcm at (0, 0, 2) and irr_3.dcm at (0, 0, 3.5) is 1.5 mm, the median gap 1 mm"});
+  c.push_back({"import", "DICOM: unknown --series", {},
+               "brickyard import $SRC/tests/data/dicom/ct --series 1.2.3.4 --out $TMP/i.store", 2,
+               "field '--series': no series 1.2.3.4 in $SRC/tests/data/dicom/ct: it holds 1 series: "
+               "1.2.826.0.1.3680043.8.498.69023019117229732970297373541128519901 (5 slices, CT)"});
+#endif
+
+  // netCDF: files netCDF4-python wrote (tests/data/netcdf/), or text named .nc. Without netCDF-C
+  // every netCDF file is refused alike, so the cases need it.
+#if BRICKYARD_HAVE_NETCDF
+  c.push_back({"import", "netCDF: unknown variable", {},
+               "brickyard import $SRC/tests/data/netcdf/ocean.nc --variable TEMP --time-step 0 --out $TMP/i.store", 1,
+               "$SRC/tests/data/netcdf/ocean.nc: field '--variable': no variable named 'TEMP'; the file has 'time(time)', "
+               "'depth(depth)', 'lat(lat)', 'lon(lon)', 'temp(time, depth, lat, lon)'"});
+  c.push_back({"import", "netCDF: 4D without --time-step", {}, "brickyard import $SRC/tests/data/netcdf/ocean.nc --out $TMP/i.store", 2,
+               "$SRC/tests/data/netcdf/ocean.nc: field '--time-step': variable 'temp' holds 2 time steps (dimension "
+               "'time')"});
+  c.push_back({"import", "netCDF: not a netCDF file", text("notes.nc", "these are notes, not data\n"),
+               "brickyard import $TMP/notes.nc --out $TMP/i.store", 1,
+               "$TMP/notes.nc: not a netCDF file: NetCDF: Unknown file format"});
 #endif
 }
 

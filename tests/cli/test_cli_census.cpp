@@ -178,6 +178,8 @@ TEST(Census, EveryBadInputFailsAsTheCensusSays) {
   const std::string census = render_census(cases, results);
   if (!vdb) GTEST_SKIP() << "this build reads no OpenVDB files: the census, which has their cases, is not compared";
   if (!nifti_support()) GTEST_SKIP() << "this build reads no NIfTI files: the census, which has their cases, is not compared";
+  if (!netcdf_support()) GTEST_SKIP() << "this build reads no netCDF files: the census, which has their cases, is not compared";
+  if (!dicom_support()) GTEST_SKIP() << "this build reads no DICOM series: the census, which has their cases, is not compared";
   const std::string readme = testing::read_file(kReadme);
   std::smatch count;
   ASSERT_TRUE(std::regex_search(readme, count, kReadmeCount)) << kReadme << " has no \"N cases across\" in its Bad input section";
