@@ -118,6 +118,46 @@ void convert_elements(const std::byte* in, ElementType from, size_t n, std::byte
   }
 }
 
+std::pair<double, double> element_limits(ElementType t) {
+  switch (t) {
+    case ElementType::u8: return {0.0, 255.0};
+    case ElementType::i8: return {-128.0, 127.0};
+    case ElementType::u16: return {0.0, 65535.0};
+    case ElementType::i16: return {-32768.0, 32767.0};
+    case ElementType::u32: return {0.0, 4294967295.0};
+    case ElementType::i32: return {-2147483648.0, 2147483647.0};
+    default: return {0.0, 0.0};
+  }
+}
+
+void scale_elements(const std::byte* in, ElementType from, size_t n, double slope, double intercept, double* out) {
+  auto apply = [&](auto tag) {
+    using S = decltype(tag);
+    for (size_t i = 0; i < n; ++i) out[i] = slope * double(load<S>(in + i * sizeof(S))) + intercept;
+  };
+  switch (from) {
+    case ElementType::u8: return apply(uint8_t{});
+    case ElementType::i8: return apply(int8_t{});
+    case ElementType::u16: return apply(uint16_t{});
+    case ElementType::i16: return apply(int16_t{});
+    case ElementType::u32: return apply(uint32_t{});
+    case ElementType::i32: return apply(int32_t{});
+    case ElementType::f32: return apply(float{});
+    case ElementType::f64: return apply(double{});
+  }
+}
+
+void store_values(const double* values, size_t n, ValueType to, std::byte* out) {
+  if (to == ValueType::f32) return convert_elements(reinterpret_cast<const std::byte*>(values), ElementType::f64, n, out);
+  dispatch_value_type(to, [&](auto tag) {
+    using T = decltype(tag);
+    T* dst = reinterpret_cast<T*>(out);
+    for (size_t i = 0; i < n; ++i) dst[i] = static_cast<T>(values[i]);
+  });
+}
+
+bool is_whole(double v) { return std::isfinite(v) && v == std::floor(v); }
+
 void swap_element_bytes(std::span<std::byte> data, size_t element_size) {
   if (element_size < 2) return;
   for (size_t i = 0; i + element_size <= data.size(); i += element_size)

@@ -14,6 +14,7 @@
 #include <limits>
 #include <span>
 #include <string>
+#include <utility>
 
 #include "core/math.h"
 #include "core/value_type.h"
@@ -52,6 +53,19 @@ void scan_elements(const std::byte* in, ElementType from, size_t n, ConversionRe
 /// converts the others to f32 (a double beyond the float range becomes an infinity, which the
 /// builder then treats as any non-finite voxel).
 void convert_elements(const std::byte* in, ElementType from, size_t n, std::byte* out);
+/// @brief Smallest and largest value of an integer element type ({0, 0} for f32 and f64).
+std::pair<double, double> element_limits(ElementType t);
+/// @brief slope * v + intercept for `n` elements of `from` (native byte order), as doubles: the
+/// rescaling of NIfTI (scl_slope/inter), DICOM (RescaleSlope/Intercept) and CF (scale_factor/
+/// add_offset).
+void scale_elements(const std::byte* in, ElementType from, size_t n, double slope, double intercept, double* out);
+/// @brief Stores `n` doubles as `to`: f32 rounds as convert_elements does; an integer type takes
+/// each value as it is (the caller has checked that every one is whole and fits, range_fits).
+void store_values(const double* values, size_t n, ValueType to, std::byte* out);
+/// @brief Whether [lo, hi] lies within an integer type's range.
+inline bool range_fits(double lo, double hi, ValueType t) { return lo >= integer_min(t) && hi <= integer_max(t); }
+/// @brief Whether v is a finite whole number.
+bool is_whole(double v);
 /// @brief Reverses the bytes of each element in place (big-endian files).
 void swap_element_bytes(std::span<std::byte> data, size_t element_size);
 

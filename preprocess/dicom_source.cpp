@@ -675,42 +675,8 @@ DicomVolume read_volume(const std::string& path, const DicomOptions& options) {
 
 // ------------------------------------------------------------------------------ the source
 
-/// slope * v + intercept for `n` elements of `from` (native byte order), as doubles.
-void scale_elements(const std::byte* in, ElementType from, size_t n, double slope, double intercept, double* out) {
-  auto apply = [&](auto tag) {
-    using S = decltype(tag);
-    for (size_t i = 0; i < n; ++i) {
-      S value;
-      std::memcpy(&value, in + i * sizeof(S), sizeof(S));
-      out[i] = slope * double(value) + intercept;
-    }
-  };
-  switch (from) {
-    case ElementType::u8: return apply(uint8_t{});
-    case ElementType::i8: return apply(int8_t{});
-    case ElementType::u16: return apply(uint16_t{});
-    case ElementType::i16: return apply(int16_t{});
-    case ElementType::u32: return apply(uint32_t{});
-    case ElementType::i32: return apply(int32_t{});
-    case ElementType::f32: return apply(float{});
-    case ElementType::f64: return apply(double{});
-  }
-}
 
-std::pair<double, double> element_limits(ElementType t) {
-  switch (t) {
-    case ElementType::u8: return {0.0, 255.0};
-    case ElementType::i8: return {-128.0, 127.0};
-    case ElementType::u16: return {0.0, 65535.0};
-    case ElementType::i16: return {-32768.0, 32767.0};
-    case ElementType::u32: return {0.0, 4294967295.0};
-    case ElementType::i32: return {-2147483648.0, 2147483647.0};
-    default: return {0.0, 0.0};
-  }
-}
 
-bool fits(double lo, double hi, ValueType t) { return lo >= integer_min(t) && hi <= integer_max(t); }
-bool whole(double v) { return std::isfinite(v) && v == std::floor(v); }
 
 class DicomSource final : public VolumeSource {
  public:
@@ -758,17 +724,8 @@ class DicomSource final : public VolumeSource {
       }
       scaled_.resize(n);
       scale_elements(in, v_.element, n, f.slope, f.intercept, scaled_.data());
-      // Integer types hold every scaled value exactly (checked when the source was opened); f32
-      // rounds as convert_elements does (a value beyond the float range was refused before).
-      if (type_ == ValueType::f32) {
-        convert_elements(reinterpret_cast<const std::byte*>(scaled_.data()), ElementType::f64, n, dst);
-        continue;
-      }
-      dispatch_value_type(type_, [&](auto tag) {
-        using T = decltype(tag);
-        T* typed = reinterpret_cast<T*>(dst);
-        for (size_t i = 0; i < n; ++i) typed[i] = static_cast<T>(scaled_[i]);
-      });
+      // Integer types hold every scaled value exactly (checked when the source was opened).
+      store_values(scaled_.data(), n, type_, dst);
     }
   }
 
@@ -919,7 +876,7 @@ class DicomSource final : public VolumeSource {
     double lo = INFINITY, hi = -INFINITY;
     const auto [elo, ehi] = element_limits(v_.element);
     for (const Frame& f : v_.frames) {
-      whole_params = whole_params && whole(f.slope) && whole(f.intercept);
+      whole_params = whole_params && is_whole(f.slope) && is_whole(f.intercept);
       const double a = f.slope * elo + f.intercept, b = f.slope * ehi + f.intercept;
       lo = std::min({lo, a, b}), hi = std::max({hi, a, b});
     }
@@ -928,7 +885,7 @@ class DicomSource final : public VolumeSource {
       if (is_native(v_.element)) candidates.push_back(stored_type(v_.element));
       if (candidates.empty() || candidates.back() != ValueType::i16) candidates.push_back(ValueType::i16);
       for (ValueType t : candidates)
-        if (fits(lo, hi, t)) {
+        if (range_fits(lo, hi, t)) {
           type_ = t;
           return;
         }
@@ -945,7 +902,7 @@ class DicomSource final : public VolumeSource {
     ConversionReport report = scan_conversion(v_.dims, ElementType::f64, read_scaled);
     if (report.min <= report.max) range_ = ValueRange{report.min, report.max};
     for (ValueType t : candidates)
-      if (report.min <= report.max && fits(report.min, report.max, t)) {
+      if (report.min <= report.max && range_fits(report.min, report.max, t)) {
         type_ = t;
         return;
       }

@@ -95,22 +95,8 @@ std::string format_name(int format) {
   }
 }
 
-/// Smallest and largest value of an integer element type.
-std::pair<double, double> element_limits(ElementType t) {
-  switch (t) {
-    case ElementType::u8: return {0.0, 255.0};
-    case ElementType::i8: return {-128.0, 127.0};
-    case ElementType::u16: return {0.0, 65535.0};
-    case ElementType::i16: return {-32768.0, 32767.0};
-    case ElementType::u32: return {0.0, 4294967295.0};
-    case ElementType::i32: return {-2147483648.0, 2147483647.0};
-    default: return {0.0, 0.0};
-  }
-}
 
 bool is_float(ElementType t) { return t == ElementType::f32 || t == ElementType::f64; }
-bool fits(double lo, double hi, ValueType t) { return lo >= integer_min(t) && hi <= integer_max(t); }
-bool whole(double v) { return std::isfinite(v) && v == std::floor(v); }
 
 /// `v` as an element of type `t` holds it (NaN for floats), or nullopt when it cannot: a raw
 /// value compared with a missing_value of another type (a double 1e20 for a float variable)
@@ -122,7 +108,7 @@ std::optional<double> as_element(double v, ElementType t) {
     return double(float(v));
   }
   const auto [lo, hi] = element_limits(t);
-  if (!whole(v) || v < lo || v > hi) return std::nullopt;
+  if (!is_whole(v) || v < lo || v > hi) return std::nullopt;
   return v;
 }
 
@@ -560,17 +546,8 @@ class NetcdfSource final : public VolumeSource {
     }
     values_.resize(n);
     unpack(raw_.data(), n, values_.data(), nullptr);
-    // Integer types hold every value exactly (checked when the source was opened); f32
-    // saturates beyond the float range as convert_elements does (refused before, in any case).
-    if (type_ == ValueType::f32) {
-      convert_elements(reinterpret_cast<const std::byte*>(values_.data()), ElementType::f64, n, out.data());
-      return;
-    }
-    dispatch_value_type(type_, [&](auto tag) {
-      using T = decltype(tag);
-      T* dst = reinterpret_cast<T*>(out.data());
-      for (size_t i = 0; i < n; ++i) dst[i] = static_cast<T>(values_[i]);
-    });
+    // Integer types hold every value exactly (checked when the source was opened).
+    store_values(values_.data(), n, type_, out.data());
   }
   std::string describe_json() const override {
     nlohmann::json j = {{"kind", "netcdf"},
@@ -709,7 +686,7 @@ class NetcdfSource final : public VolumeSource {
     if (lo - 1 >= integer_min(t)) return lo - 1;
     if (hi + 1 <= integer_max(t)) return hi + 1;
     const double fill = *h_.fill_value * h_.scale + h_.offset;  // unpacked; it differs from every valid value
-    if (whole(fill) && fits(fill, fill, t)) return fill;
+    if (is_whole(fill) && range_fits(fill, fill, t)) return fill;
     return std::nullopt;
   }
 
@@ -723,7 +700,7 @@ class NetcdfSource final : public VolumeSource {
                                 h_.element == ElementType::u16 || h_.element == ElementType::i16;
     if (!h_.scaled) {
       if (is_native(h_.element) && !is_float(h_.element)) candidates.push_back(stored_type(h_.element));
-    } else if (small_integers && whole(h_.scale) && whole(h_.offset)) {
+    } else if (small_integers && is_whole(h_.scale) && is_whole(h_.offset)) {
       candidates.push_back(stored_type(h_.element));
       if (candidates.back() != ValueType::i16) candidates.push_back(ValueType::i16);
     }
@@ -738,7 +715,7 @@ class NetcdfSource final : public VolumeSource {
         lo = h_.scale * lo + h_.offset, hi = h_.scale * hi + h_.offset;
         if (lo > hi) std::swap(lo, hi);
         for (ValueType t : candidates)
-          if (fits(lo, hi, t)) {
+          if (range_fits(lo, hi, t)) {
             type_ = t;
             return;
           }
@@ -749,7 +726,7 @@ class NetcdfSource final : public VolumeSource {
     replace_missing_ = missing_voxels_ > 0;
     const double lo = report.min, hi = report.max;
     for (ValueType t : candidates) {
-      if (lo <= hi && !fits(lo, hi, t)) continue;
+      if (lo <= hi && !range_fits(lo, hi, t)) continue;
       if (!replace_missing_) {
         type_ = t;
         if (lo <= hi) range_ = ValueRange{lo, hi};

@@ -52,18 +52,6 @@ std::optional<ElementType> element_of(int datatype) {
   }
 }
 
-/// Smallest and largest value of an integer element type.
-std::pair<double, double> element_limits(ElementType t) {
-  switch (t) {
-    case ElementType::u8: return {0.0, 255.0};
-    case ElementType::i8: return {-128.0, 127.0};
-    case ElementType::u16: return {0.0, 65535.0};
-    case ElementType::i16: return {-32768.0, 32767.0};
-    case ElementType::u32: return {0.0, 4294967295.0};
-    case ElementType::i32: return {-2147483648.0, 2147483647.0};
-    default: return {0.0, 0.0};
-  }
-}
 
 /// Up to `n` bytes from the start of a (possibly gzip-compressed) file; nullopt when zlib
 /// reports corrupt data.
@@ -412,30 +400,7 @@ class DataStream {
   uint64_t position_ = 0;  ///< bytes of the volume before the file position
 };
 
-/// slope * v + inter for `n` elements of `from` (native byte order), as doubles.
-void scale_elements(const std::byte* in, ElementType from, size_t n, double slope, double inter, double* out) {
-  auto apply = [&](auto tag) {
-    using S = decltype(tag);
-    for (size_t i = 0; i < n; ++i) {
-      S v;
-      std::memcpy(&v, in + i * sizeof(S), sizeof(S));
-      out[i] = slope * double(v) + inter;
-    }
-  };
-  switch (from) {
-    case ElementType::u8: return apply(uint8_t{});
-    case ElementType::i8: return apply(int8_t{});
-    case ElementType::u16: return apply(uint16_t{});
-    case ElementType::i16: return apply(int16_t{});
-    case ElementType::u32: return apply(uint32_t{});
-    case ElementType::i32: return apply(int32_t{});
-    case ElementType::f32: return apply(float{});
-    case ElementType::f64: return apply(double{});
-  }
-}
 
-bool fits(double lo, double hi, ValueType t) { return lo >= integer_min(t) && hi <= integer_max(t); }
-bool whole(double v) { return std::isfinite(v) && v == std::floor(v); }
 
 class NiftiSource final : public VolumeSource {
  public:
@@ -493,17 +458,8 @@ class NiftiSource final : public VolumeSource {
     }
     scaled_.resize(n);
     scale_elements(raw_.data(), h_.element, n, h_.slope, h_.inter, scaled_.data());
-    // Integer types hold every scaled value exactly (checked when the source was opened); f32
-    // saturates beyond the float range as convert_elements does (refused before, in any case).
-    if (type_ == ValueType::f32) {
-      convert_elements(reinterpret_cast<const std::byte*>(scaled_.data()), ElementType::f64, n, out.data());
-      return;
-    }
-    dispatch_value_type(type_, [&](auto tag) {
-      using T = decltype(tag);
-      T* dst = reinterpret_cast<T*>(out.data());
-      for (size_t i = 0; i < n; ++i) dst[i] = static_cast<T>(scaled_[i]);
-    });
+    // Integer types hold every scaled value exactly (checked when the source was opened).
+    store_values(scaled_.data(), n, type_, out.data());
   }
   std::string describe_json() const override {
     nlohmann::json j = {{"kind", "nifti"},
@@ -550,14 +506,14 @@ class NiftiSource final : public VolumeSource {
     std::vector<ValueType> candidates;
     const bool small_integers = h_.element == ElementType::u8 || h_.element == ElementType::i8 ||
                                 h_.element == ElementType::u16 || h_.element == ElementType::i16;
-    if (small_integers && whole(h_.slope) && whole(h_.inter)) {
+    if (small_integers && is_whole(h_.slope) && is_whole(h_.inter)) {
       candidates.push_back(stored_type(h_.element));
       if (candidates.back() != ValueType::i16) candidates.push_back(ValueType::i16);
       auto [lo, hi] = element_limits(h_.element);
       lo = h_.slope * lo + h_.inter, hi = h_.slope * hi + h_.inter;
       if (lo > hi) std::swap(lo, hi);
       for (ValueType t : candidates)
-        if (fits(lo, hi, t)) {
+        if (range_fits(lo, hi, t)) {
           type_ = t;
           return;
         }
@@ -572,7 +528,7 @@ class NiftiSource final : public VolumeSource {
     rewind();
     if (report.min <= report.max) range_ = ValueRange{report.min, report.max};
     for (ValueType t : candidates)
-      if (report.min <= report.max && fits(report.min, report.max, t)) {
+      if (report.min <= report.max && range_fits(report.min, report.max, t)) {
         type_ = t;
         return;
       }
