@@ -89,7 +89,7 @@ void add_generate_command(CLI::App& app, const GlobalOptions&) {
   for (const auto& n : field_names()) names += (names.empty() ? "" : ", ") + n;
   cmd->add_option("FIELD", opts->field, "Field to sample: " + names);
   cmd->add_option("-s,--size", opts->size, "Grid size: N for N^3, or NX,NY,NZ")->capture_default_str();
-  cmd->add_option("-t,--type", opts->type, "Value type: u8, u16 or f32 (u8/u16 quantise the field's range)")
+  cmd->add_option("-t,--type", opts->type, "Value type: u8, i8, u16, i16 or f32 (integer types quantise the field's range, or hold an integer-valued field's values as they are)")
       ->capture_default_str();
   cmd->add_option("-o,--out", opts->out, "Output raw file; its sidecar is written next to it as FILE.json");
   cmd->add_option("--set", opts->params, "Field parameter NAME=VALUE (repeatable; see --list)");

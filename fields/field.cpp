@@ -74,6 +74,8 @@ const Entry kFields[] = {
     {"sparse-blobs", "clusters of smooth blobs in an exactly constant (0) background", make_sparse_blobs},
     {"linear", "a linear function a . p + b: planar isosurfaces, exact on any mesh or grid", make_linear},
     {"wavelet", "VTK's wavelet (vtkRTAnalyticSource) on [-1/2,1/2]^3: f32 grids equal VTK's bit for bit", make_wavelet},
+    {"shepp-logan", "3D Shepp-Logan head phantom in Hounsfield-like units (air -1000, brain 20, skull 1000) on [-1,1]^3: "
+     "CT-shaped, integer-valued (i16 stores it exactly)", make_shepp_logan},
 };
 }  // namespace
 

@@ -51,6 +51,9 @@ class Field {
   /// @brief Gradient at p: analytic where has_analytic_gradient(), else central differences.
   virtual Vec3d gradient(const Vec3d& p) const;
   virtual bool has_analytic_gradient() const { return false; }
+  /// @brief Whether value() is an integer everywhere: integer grids whose type holds
+  /// range() then store the values themselves rather than quantising the range onto the type.
+  virtual bool integer_valued() const { return false; }
   /// @brief out[i] = value(p0 + (i * dx, 0, 0)) for i in [0, n). One virtual call per row,
   /// so the per-sample code is inlined and vectorisable.
   virtual void sample_row(const Vec3d& p0, double dx, int64_t n, double* out) const = 0;

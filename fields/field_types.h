@@ -16,5 +16,6 @@ std::unique_ptr<Field> make_fbm(FieldParamReader& params);
 std::unique_ptr<Field> make_menger(FieldParamReader& params);
 std::unique_ptr<Field> make_sparse_blobs(FieldParamReader& params);
 std::unique_ptr<Field> make_wavelet(FieldParamReader& params);
+std::unique_ptr<Field> make_shepp_logan(FieldParamReader& params);
 
 }  // namespace brickyard

@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <cmath>
 #include <filesystem>
 #include <future>
 #include <limits>
@@ -46,11 +47,23 @@ GridSampler::GridSampler(const Field& field, const Vec3s& dims, ValueType type)
   }
 }
 
+bool GridSampler::stores_values_as_is() const {
+  if (!is_integer(type_) || !field_.integer_valued()) return false;
+  const ValueRange r = field_.range();
+  return r.lo >= integer_min(type_) && r.hi <= integer_max(type_);
+}
+
+ValueRange GridSampler::quantization() const {
+  if (stores_values_as_is()) return {integer_min(type_), integer_max(type_)};
+  return field_.range();
+}
+
 namespace {
 template <typename T>
 void sample_rows(const GridSampler& s, int64_t z0, int64_t z1, T* out) {
   const Vec3s dims = s.dims();
   const ValueRange q = s.quantization();
+  const bool as_is = s.stores_values_as_is();
   const int64_t rows = (z1 - z0) * dims.y;
   parallel_for<int64_t>(0, rows, 4, [&](int64_t row_begin, int64_t row_end) {
     std::vector<double> row(size_t(dims.x));
@@ -58,7 +71,13 @@ void sample_rows(const GridSampler& s, int64_t z0, int64_t z1, T* out) {
       const int64_t z = z0 + i / dims.y, y = i % dims.y;
       s.field().sample_row(s.position(0, y, z), s.spacing().x, dims.x, row.data());
       T* dst = out + i * dims.x;
-      for (int64_t x = 0; x < dims.x; ++x) dst[x] = quantize<T>(row[size_t(x)], q);
+      if (as_is) {
+        // The field's integers themselves; (x - lo) / (hi - lo) * (hi - lo) would round some.
+        for (int64_t x = 0; x < dims.x; ++x)
+          dst[x] = static_cast<T>(std::clamp(std::nearbyint(row[size_t(x)]), q.lo, q.hi));
+      } else {
+        for (int64_t x = 0; x < dims.x; ++x) dst[x] = quantize<T>(row[size_t(x)], q);
+      }
     }
   });
 }

@@ -57,8 +57,12 @@ class GridSampler {
   Vec3d position(int64_t i, int64_t j, int64_t k) const {
     return origin() + Vec3d(double(i), double(j), double(k)) * spacing_;
   }
-  /// @brief The real range u8/u16 quantise (the field's range).
-  ValueRange quantization() const { return field_.range(); }
+  /// @brief Whether integer samples are the field's values themselves: an integer-valued
+  /// field (Field::integer_valued()) whose range the integer type holds.
+  bool stores_values_as_is() const;
+  /// @brief The real range integer types quantise: the field's range, or the type's own
+  /// range when stores_values_as_is() (stored s means s).
+  ValueRange quantization() const;
   size_t slice_bytes() const { return size_t(dims_.x) * size_t(dims_.y) * size_of(type_); }
 
   /// @brief Fills z-slices [z0, z1) into out (exactly (z1 - z0) * slice_bytes() bytes),

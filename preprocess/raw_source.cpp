@@ -184,7 +184,7 @@ class FieldSource final : public VolumeSource {
   Vec3d origin() const override { return sampler_.origin(); }
   bool may_contain_nonfinite() const override { return false; }
   std::optional<ValueRange> value_range_hint() const override {
-    if (is_integer(type())) return ValueRange{0.0, integer_max(type())};
+    if (is_integer(type())) return ValueRange{integer_min(type()), integer_max(type())};
     return field_->range();
   }
   void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override { sampler_.sample_slab(z0, z1, out); }
@@ -192,7 +192,7 @@ class FieldSource final : public VolumeSource {
     nlohmann::json params = nlohmann::json::object();
     for (const auto& p : field_->params()) params[p.name] = p.value;
     nlohmann::json j = {{"kind", "field"}, {"field", std::string(field_->name())}, {"params", params}};
-    if (is_integer(type())) j["quantization"] = {field_->range().lo, field_->range().hi};
+    if (is_integer(type())) j["quantization"] = {sampler_.quantization().lo, sampler_.quantization().hi};
     return j.dump();
   }
 

@@ -33,7 +33,7 @@ Vec3d central_difference(const Field& f, const Vec3d& p, double h) {
 
 TEST(FieldRegistry, ListsEveryFieldAndRejectsUnknownNames) {
   const std::vector<std::string> expected = {"marschner-lobb", "sphere", "torus", "gyroid",
-                                             "fbm", "menger", "sparse-blobs", "linear", "wavelet"};
+                                             "fbm", "menger", "sparse-blobs", "linear", "wavelet", "shepp-logan"};
   EXPECT_EQ(field_names(), expected);
   for (const auto& info : field_catalog()) {
     EXPECT_FALSE(info.description.empty());
@@ -135,6 +135,43 @@ TEST(Menger, SolidFractionIsExactlyTwentyOverTwentySevenPerLevel) {
   EXPECT_EQ(f->value({0.0, 0.0, 0.0}), 1.0);
   EXPECT_EQ(f->value({1.0, 1.0, 1.0}), 1.0);
   EXPECT_EQ(f->value({1.5, 0.0, 0.0}), 0.0);  // outside the domain
+}
+
+TEST(SheppLogan, HounsfieldUnitsOfEachTissue) {
+  auto f = make_field("shepp-logan");
+  EXPECT_TRUE(f->integer_valued());
+  EXPECT_EQ(f->value({0.0, 0.0, 0.0}), 20.0);     // brain: 2.00 - 0.98 = 1.02
+  EXPECT_EQ(f->value({0.22, 0.0, 0.0}), 0.0);     // right ventricle: 1.02 - 0.02 = 1.00, water
+  EXPECT_EQ(f->value({-0.22, 0.0, 0.0}), 0.0);    // left ventricle
+  EXPECT_EQ(f->value({0.0, 0.35, 0.0}), 30.0);    // the large tumour: 1.03
+  EXPECT_EQ(f->value({0.0, -0.1, 0.0}), 30.0);    // a small one
+  EXPECT_EQ(f->value({0.0, 0.0, 0.795}), 1000.0); // skull above the brain (z between 0.78 and 0.81)
+  EXPECT_EQ(f->value({0.68, 0.0, 0.0}), 1000.0);  // skull at the side (x between 0.6624 and 0.69)
+  EXPECT_EQ(f->value({0.95, 0.0, 0.0}), -1000.0); // air
+  EXPECT_EQ(f->value({-1.0, -1.0, -1.0}), -1000.0);
+  // The ventricles are tilted by -18 and +18 degrees: mirror images of each other in x.
+  EXPECT_EQ(f->value({0.22 + 0.3 * std::sin(18 * kPi / 180), 0.3 * std::cos(18 * kPi / 180), 0.0}), 0.0);
+  EXPECT_EQ(f->value({-0.22 - 0.3 * std::sin(18 * kPi / 180), 0.3 * std::cos(18 * kPi / 180), 0.0}), 0.0);
+  // Along the other tilt, out of the ventricle into the brain.
+  EXPECT_EQ(f->value({0.22 + 0.3 * std::sin(18 * kPi / 180), -0.3 * std::cos(18 * kPi / 180), 0.0}), 20.0);
+  EXPECT_EQ(f->value({0.22 - 0.3 * std::sin(18 * kPi / 180), -0.3 * std::cos(18 * kPi / 180), 0.0}), 0.0);
+}
+
+TEST(SheppLogan, SkullVolumeIsTheDifferenceOfTwoEllipsoids) {
+  // Midpoint rule on a 160^3 lattice over [-1, 1]^3 against 4/3 pi (a1 b1 c1 - a2 b2 c2): the
+  // brain's ellipsoid lies inside the skull's, so every point at 1000 HU is between them.
+  auto f = make_field("shepp-logan");
+  const int n = 160;
+  std::vector<double> row(n);
+  int64_t skull = 0;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y) {
+      f->sample_row({-1 + 1.0 / n, -1 + (2 * y + 1.0) / n, -1 + (2 * z + 1.0) / n}, 2.0 / n, n, row.data());
+      for (double v : row) skull += v == 1000.0;
+    }
+  const double measured = double(skull) * 8.0 / (double(n) * n * n);
+  const double expected = 4.0 / 3.0 * kPi * (0.69 * 0.92 * 0.81 - 0.6624 * 0.874 * 0.78);
+  EXPECT_NEAR(measured, expected, 0.02 * expected);
 }
 
 TEST(SparseBlobs, MostOfTheDomainIsExactlyZero) {

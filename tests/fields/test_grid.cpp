@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <set>
 #include <vector>
 
 #include <tbb/global_control.h>
@@ -61,6 +62,31 @@ TEST(GridSampler, IntegerGridsQuantiseWithinHalfAStep) {
       EXPECT_LE(std::abs(dequantize(stored, t, f->range()) - f->value(s.position(i, j, k))), step / 2 + 1e-12);
     }
   }
+}
+
+TEST(GridSampler, IntegerValuedFieldsAreStoredAsTheyAreWhereTheTypeHoldsThem) {
+  auto f = make_field("shepp-logan");  // integers in [-1000, 1000]
+  GridSampler s(*f, {20, 20, 20}, ValueType::i16);
+  EXPECT_TRUE(s.stores_values_as_is());
+  EXPECT_EQ(s.quantization().lo, -32768.0);
+  EXPECT_EQ(s.quantization().hi, 32767.0);
+  const auto bytes = whole_grid(s);
+  const int16_t* v = reinterpret_cast<const int16_t*>(bytes.data());
+  std::set<int> seen;
+  for (int64_t n = 0; n < 20 * 20 * 20; ++n) {
+    const Vec3d p = s.position(n % 20, (n / 20) % 20, n / 400);
+    ASSERT_EQ(double(v[n]), f->value(p)) << n;
+    seen.insert(v[n]);
+  }
+  EXPECT_TRUE(seen.count(-1000) && seen.count(20) && seen.count(1000));
+  // Types that cannot hold [-1000, 1000] quantise the range as for any field.
+  for (ValueType t : {ValueType::u8, ValueType::i8, ValueType::u16, ValueType::f32}) {
+    GridSampler q(*f, {4, 4, 4}, t);
+    EXPECT_FALSE(q.stores_values_as_is()) << to_string(t);
+    EXPECT_EQ(q.quantization().lo, -1000.0);
+  }
+  // A field that is not integer-valued is quantised even where its range would fit.
+  EXPECT_FALSE(GridSampler(*make_field("gyroid"), {4, 4, 4}, ValueType::i16).stores_values_as_is());
 }
 
 TEST(Quantize, ClampsOutOfRangeAndNaN) {
