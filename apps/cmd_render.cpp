@@ -22,6 +22,7 @@
 #include "core/timing.h"
 #include "core/units.h"
 #include "report/bench_report.h"
+#include "report/peer_results.h"
 #include "renderers/common/metrics.h"
 #include "session/render_session.h"
 
@@ -281,6 +282,7 @@ struct BenchOptions {
   int warm = 5, cold = 3;
   int reference_supersample = 1;
   std::string size;
+  std::string peers;
 };
 
 double median_of(std::vector<double> v) {
@@ -289,26 +291,70 @@ double median_of(std::vector<double> v) {
 }
 double p95_of(std::vector<double> v) { return v.empty() ? 0 : percentile(v, 95); }
 
-/// Times `cold` frames on an empty cache and `warm` frames on a warmed one; returns the row and
-/// the last warm frame.
-BenchRow measure(RenderSession& session, int frame, int cold, int warm, const FrameOutputs& outputs, FrameBuffers& last) {
+/// The first frames of a cold run: the first frame from empty caches (its time and error),
+/// then the frames a viewer would see, each followed by the loads it asked for, until the back
+/// end converges.
+struct ColdRun {
+  double first_s = 0, converged_s = 0;
+  int frames = 0;
+  ImageError first_error;
+};
+
+ColdRun cold_run(RenderSession& session, const FrameSetup& setup, const FrameBuffers* truth, double voxel_size,
+                 FrameBuffers& scratch) {
+  ColdRun run;
+  Stopwatch wall;
+  const FrameStats first = session.render(setup, scratch);
+  run.first_s = first.seconds;
+  run.frames = 1;
+  // The error is computed off the clock: the frames after it start when it is done, and the
+  // wall time to convergence counts only rendering and loading.
+  const double before_error = wall.seconds();
+  if (truth) run.first_error = compare_frames(scratch, *truth, voxel_size);
+  double off_clock = wall.seconds() - before_error;
+  session.pages().wait_idle();
+  while (!session.converged() && run.frames < RenderSession::kMaxSettleFrames) {
+    session.render(setup, scratch);
+    session.pages().wait_idle();
+    ++run.frames;
+  }
+  run.converged_s = wall.seconds() - off_clock;
+  return run;
+}
+
+/// Times `cold` runs from empty caches (cold_run()) and `warm` frames on warmed caches;
+/// returns the row and the last warm frame. `truth` (null for the reference itself) gives the
+/// first frames' error.
+BenchRow measure(RenderSession& session, int frame, int cold, int warm, const FrameOutputs& outputs, FrameBuffers& last,
+                 const FrameBuffers* truth, double voxel_size) {
   BenchRow row;
-  std::vector<double> cold_s, warm_s;
-  FrameStats stats;
+  std::vector<double> first_s, converged_s, frames, first_rmse, first_ssim;
+  const FrameSetup setup = session.setup(frame, outputs);
   for (int i = 0; i < cold; ++i) {
     if (i > 0) session.reset_cache();
-    stats = session.render(frame, last, outputs);
-    cold_s.push_back(stats.seconds);
+    const ColdRun run = cold_run(session, setup, truth, voxel_size, last);
+    first_s.push_back(run.first_s);
+    converged_s.push_back(run.converged_s);
+    frames.push_back(run.frames);
+    first_rmse.push_back(run.first_error.rmse);
+    first_ssim.push_back(run.first_error.ssim);
   }
   // Warm: the cache filled and the back end converged (asynchronous back ends refine over
   // frames as their data arrives).
   row.settle_frames = session.settle(frame, outputs, RenderSession::kMaxSettleFrames, RenderSession::Settle::complete);
+  std::vector<double> warm_s;
+  FrameStats stats;
   for (int i = 0; i < warm; ++i) {
     stats = session.render(frame, last, outputs);
     warm_s.push_back(stats.seconds);
   }
-  row.cold_median_s = median_of(cold_s);
-  row.cold_p95_s = p95_of(cold_s);
+  row.cold_median_s = median_of(first_s);
+  row.cold_p95_s = p95_of(first_s);
+  if (cold > 0) {
+    row.converged_median_s = median_of(converged_s);
+    row.converged_frames = int(std::lround(median_of(frames)));
+    if (truth) row.first_rmse = median_of(first_rmse), row.first_ssim = median_of(first_ssim);
+  }
   row.warm_median_s = median_of(warm_s);
   row.warm_p95_s = p95_of(warm_s);
   row.cold_runs = cold;
@@ -328,6 +374,15 @@ std::string safe_name(const std::string& s) {
   std::string out;
   for (char c : s) out += (std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-') ? c : '_';
   return out;
+}
+
+void print_equal_error(const std::vector<EqualErrorRow>& rows) {
+  for (const EqualErrorRow& e : rows) {
+    const char* mark = e.bound == EqualErrorRow::Bound::at_most ? ">= " : e.bound == EqualErrorRow::Bound::at_least ? "<= " : "";
+    std::cout << fmt::format("  {:<10} at {} (RMSE {:.4g}): {}{:.2f}x as fast as {}\n", e.backend,
+                             e.against_quality.empty() ? e.against : e.against + " " + e.against_quality, e.rmse, mark,
+                             e.speedup(), e.against);
+  }
 }
 
 void run_bench(const BenchOptions& o) {
@@ -390,6 +445,13 @@ void run_bench(const BenchOptions& o) {
           .with_field("--quality");
   }
 
+  // Peers are read before anything is rendered: a bad file fails at once.
+  const std::vector<PeerResult> peers = o.peers.empty() ? std::vector<PeerResult>{} : read_peer_results(o.peers);
+  for (const PeerResult& p : peers) {
+    if (backends().contains(p.name))
+      throw Error(Errc::format, fmt::format("peer '{}' has a back end's name", p.name)).with_file(o.peers).with_field("name");
+    if (!fs::is_regular_file(p.image)) throw Error(Errc::io, "no such image (a peer's \"image\")").with_file(p.image);
+  }
   {
     // The supersampled truth and its resolved copy, then each back end's frame beside the truth.
     const double pixels = double(scene.width) * double(scene.height);
@@ -427,7 +489,7 @@ void run_bench(const BenchOptions& o) {
     voxel_size = ref.context().geometry().voxel_size;
     FrameBuffers fine_truth;
     // Supersampled, no cold frame: it would cost N^2 reference frames more, and its time is not compared.
-    BenchRow row = measure(ref, frame, supersample > 1 ? 0 : 1, 1, outputs, fine_truth);
+    BenchRow row = measure(ref, frame, supersample > 1 ? 0 : 1, 1, outputs, fine_truth, nullptr, 1);
     truth = supersample > 1 ? resolve_supersampled(fine_truth, supersample) : std::move(fine_truth);
     if (supersample > 1) row.quality = fmt::format("supersample={}", supersample);
     row.backend = "reference";
@@ -468,19 +530,30 @@ void run_bench(const BenchOptions& o) {
       if (!knob.empty()) so.params[knob] = v;
       RenderSession session(scene, so);
       FrameBuffers fb;
-      BenchRow row = measure(session, frame, o.cold, o.warm, outputs, fb);
+      BenchRow row = measure(session, frame, o.cold, o.warm, outputs, fb, &truth, voxel_size);
       row.backend = name;
       row.quality = knob.empty() ? "" : fmt::format("{}={:g}", knob, v);
       row.quality_value = v;
       row.error = compare_frames(fb, truth, voxel_size);
       row.image = fmt::format("images/{}-{}.png", safe_name(name), safe_name(row.quality));
       write_png((fs::path(o.out) / row.image).string(), to_rgba8(fb.color));
-      std::cout << fmt::format("  {:<10} {:<10} {:>10} cold {:>10} warm  RMSE {:.4g}  SSIM {:.4f}  {} rays/s/core\n", name,
-                               row.quality, row.cold_runs > 0 ? format_duration(row.cold_median_s) : "-",
-                               format_duration(row.warm_median_s),
-                               row.error.rmse, row.error.ssim, format_count(row.rays_per_second_per_core));
+      std::cout << fmt::format("  {:<10} {:<10} {:>10} first (RMSE {:.3g}) {:>10} converged ({} frames) {:>10} warm  RMSE "
+                               "{:.4g}  SSIM {:.4f}  {} rays/s/core\n",
+                               name, row.quality, row.cold_runs > 0 ? format_duration(row.cold_median_s) : "-",
+                               row.first_rmse, row.cold_runs > 0 ? format_duration(row.converged_median_s) : "-",
+                               row.converged_frames, format_duration(row.warm_median_s), row.error.rmse, row.error.ssim,
+                               format_count(row.rays_per_second_per_core));
       report.rows.push_back(row);
     }
+  }
+  for (const PeerResult& p : peers) {
+    BenchRow row = peer_row(p, truth, voxel_size);
+    row.image = fmt::format("images/peer-{}-{}.png", safe_name(p.name), safe_name(p.quality));
+    fs::copy_file(p.image, fs::path(o.out) / row.image, fs::copy_options::overwrite_existing);
+    std::cout << fmt::format("  {:<10} {:<10} {:>10} first {:>10} steady  RMSE {:.4g}  SSIM {:.4f}  (peer)\n", p.name,
+                             p.quality, format_duration(row.cold_median_s), format_duration(row.warm_median_s),
+                             row.error.rmse, row.error.ssim);
+    report.rows.push_back(std::move(row));
   }
   BenchReportPaths paths;
   try {
@@ -493,13 +566,12 @@ void run_bench(const BenchOptions& o) {
     paths.csv = (fs::path(o.out) / "bench.csv").string();
     paths.equal_error_csv = (fs::path(o.out) / "equal-error.csv").string();
   }
-  const std::vector<EqualErrorRow> equal_error = equal_error_rows(report.rows);
-  if (!equal_error.empty()) std::cout << "at equal error:\n";
-  for (const EqualErrorRow& e : equal_error) {
-    const char* mark = e.bound == EqualErrorRow::Bound::at_most ? ">= " : e.bound == EqualErrorRow::Bound::at_least ? "<= " : "";
-    std::cout << fmt::format("  {:<10} at {} (RMSE {:.4g}): {}{:.2f}x as fast as {}\n", e.backend,
-                             e.against_quality.empty() ? e.against : e.against + " " + e.against_quality, e.rmse, mark,
-                             e.speedup(), e.against);
+  for (const BenchTime which : {BenchTime::warm, BenchTime::converged}) {
+    const std::vector<EqualErrorRow> equal_error = equal_error_rows(report.rows, which);
+    if (!equal_error.empty())
+      std::cout << (which == BenchTime::warm ? "at equal error, steady frames:\n"
+                                             : "at equal error, from empty caches to the converged image:\n");
+    print_equal_error(equal_error);
   }
   std::cout << fmt::format("report: {}\n  table {}\n", paths.markdown, paths.csv);
   if (!paths.equal_error_csv.empty()) std::cout << fmt::format("  equal error {}\n", paths.equal_error_csv);
@@ -545,6 +617,9 @@ void add_render_commands(CLI::App& app, int& exit_status) {
                     "Render the reference at N times the width and height (N odd, at most 16384 pixels a side) and "
                     "box-filter it down: error against each pixel's mean over its area rather than its centre ray, the "
                     "truth for back ends that filter");
+    cmd->add_option("--peers", o->peers,
+                    "Other programs' results on the same view (peers.json, written by bench/peers/dvr.sh): their images' "
+                    "error against the reference, their times, in the same report");
     cmd->add_option("--out", o->out, "Report directory (bench.md, bench.csv, equal-error.csv, error-vs-time.png, contact-sheet.png, images/)");
     cmd->callback([o] { naming_options({{"backend", "--backends"}}, [&] { run_bench(*o); }); });
   }

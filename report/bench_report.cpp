@@ -115,7 +115,8 @@ std::string csv_text(const BenchReport& report, const std::vector<bool>& on_fron
       "backend,quality,quality_value,width,height,threads,cold_median_s,cold_p95_s,warm_median_s,warm_p95_s,"
       "cold_runs,warm_runs,settle_frames,is_reference,pareto,rays_per_second_per_core,samples,bricks,bytes_read,rmse,psnr_db,ssim,"
       "depth_mean,depth_p99,depth_max,normal_mean_deg,normal_p99_deg,depth_pixels,normal_pixels,coverage_mismatch,"
-      "coverage_mismatch_fraction,nonfinite_color_pixels,image\n";
+      "coverage_mismatch_fraction,nonfinite_color_pixels,first_rmse,first_ssim,converged_median_s,converged_frames,"
+      "is_peer,peak_rss_bytes,description,image\n";
   for (size_t i = 0; i < report.rows.size(); ++i) {
     const BenchRow& r = report.rows[i];
     const ImageError& e = r.error;
@@ -124,11 +125,14 @@ std::string csv_text(const BenchReport& report, const std::vector<bool>& on_fron
                        csv_number(r.cold_median_s), csv_number(r.cold_p95_s), csv_number(r.warm_median_s),
                        csv_number(r.warm_p95_s), r.cold_runs, r.warm_runs, r.settle_frames, int(r.is_reference), int(on_front[i]),
                        csv_number(r.rays_per_second_per_core), r.samples, r.bricks, r.bytes_read);
-    out += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", csv_number(e.rmse), csv_number(e.psnr_db),
+    out += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},", csv_number(e.rmse), csv_number(e.psnr_db),
                        csv_number(e.ssim), csv_number(e.depth_mean), csv_number(e.depth_p99), csv_number(e.depth_max),
                        csv_number(e.normal_mean_deg), csv_number(e.normal_p99_deg), e.depth_pixels, e.normal_pixels,
-                       e.coverage_mismatch, csv_number(e.coverage_mismatch_fraction), e.nonfinite_color_pixels,
-                       csv_field(r.image));
+                       e.coverage_mismatch, csv_number(e.coverage_mismatch_fraction), e.nonfinite_color_pixels);
+    // The image stays last, where it always was; it is never empty for rendered rows.
+    out += fmt::format("{},{},{},{},{},{},{},{}\n", csv_number(r.first_rmse), csv_number(r.first_ssim),
+                       csv_number(r.converged_median_s), r.converged_frames, int(r.is_peer), r.peak_rss_bytes,
+                       csv_field(r.description), csv_field(r.image));
   }
   return out;
 }
@@ -143,11 +147,11 @@ const char* bound_name(EqualErrorRow::Bound b) {
 }
 
 std::string equal_error_csv_text(const std::vector<EqualErrorRow>& rows) {
-  std::string out = "backend,against,against_quality,rmse,against_time_s,backend_time_s,time_bound,speedup\n";
+  std::string out = "backend,against,against_quality,rmse,against_time_s,backend_time_s,time_bound,speedup,time\n";
   for (const EqualErrorRow& e : rows)
-    out += fmt::format("{},{},{},{},{},{},{},{}\n", csv_field(e.backend), csv_field(e.against), csv_field(e.against_quality),
+    out += fmt::format("{},{},{},{},{},{},{},{},{}\n", csv_field(e.backend), csv_field(e.against), csv_field(e.against_quality),
                        csv_number(e.rmse), csv_number(e.against_time_s), csv_number(e.backend_time_s), bound_name(e.bound),
-                       csv_number(e.speedup()));
+                       csv_number(e.speedup()), e.time == BenchTime::warm ? "warm" : "converged");
   return out;
 }
 
@@ -309,16 +313,21 @@ std::string distinct(const std::vector<BenchRow>& rows, F&& f) {
 }
 
 /// The equal-error table: a back end's time as "≤ 12.3" / "≥ 12.3" / "12.3" ms, and the speed-up likewise.
-std::string equal_error_markdown(const std::vector<EqualErrorRow>& rows) {
-  if (rows.empty()) return "";
+std::string equal_error_markdown(const std::vector<EqualErrorRow>& rows, BenchTime which) {
+  if (std::none_of(rows.begin(), rows.end(), [&](const EqualErrorRow& e) { return e.time == which; })) return "";
   std::string s =
-      "## At equal error\n\n"
-      "Each back end's warm time at the RMSE of every row of another, interpolated log-log along its own Pareto "
-      "front; ≤ where its fastest row is already more accurate (that row's time), ≥ where none is that accurate "
-      "(its most accurate row's time). Speed-up: the other's time over this one's (above 1: faster).\n\n"
-      "| Backend | Against | At RMSE of | RMSE | Against ms | Backend ms | Speed-up |\n"
-      "|---|---|---|--:|--:|--:|--:|\n";
+      which == BenchTime::warm
+          ? "## At equal error: steady frames\n\n"
+            "Each back end's warm time at the RMSE of every row of another, interpolated log-log along its own Pareto "
+            "front; ≤ where its fastest row is already more accurate (that row's time), ≥ where none is that accurate "
+            "(its most accurate row's time). Speed-up: the other's time over this one's (above 1: faster).\n\n"
+          : "## At equal error: from empty caches to the converged image\n\n"
+            "The same comparison with the time from empty caches to the converged image (for a peer, its first "
+            "frame) in place of the warm frame's.\n\n";
+  s += "| Backend | Against | At RMSE of | RMSE | Against ms | Backend ms | Speed-up |\n"
+       "|---|---|---|--:|--:|--:|--:|\n";
   for (const EqualErrorRow& e : rows) {
+    if (e.time != which) continue;
     const char* time_mark = e.bound == EqualErrorRow::Bound::at_most ? "≤ " : e.bound == EqualErrorRow::Bound::at_least ? "≥ " : "";
     const char* speed_mark = e.bound == EqualErrorRow::Bound::at_most ? "≥ " : e.bound == EqualErrorRow::Bound::at_least ? "≤ " : "";
     s += fmt::format("| {} | {} | {} | {:.4g} | {} | {}{} | {}{:.2f}× |\n", md_cell(e.backend), md_cell(e.against),
@@ -341,9 +350,10 @@ std::string markdown_text(const std::string& dir, const BenchReport& report, con
   }
   if (!written.error_plot.empty()) s += "![Colour RMSE against warm frame time](error-vs-time.png)\n\n";
 
-  s += "| Backend | Quality | Cold median ms | Cold p95 ms | Warm median ms | Warm p95 ms | Rays/s/core | Read/frame "
-       "| RMSE | PSNR dB | SSIM | Depth mean vox | Depth p99 vox | Normal mean ° | Coverage mismatch % | Pareto | Image |\n";
-  s += "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|:-:|---|\n";
+  s += "| Backend | Quality | First frame ms | First RMSE | Converged ms | Frames | Warm median ms | Warm p95 ms "
+       "| Rays/s/core | Read/frame | RMSE | PSNR dB | SSIM | Depth mean vox | Depth p99 vox | Normal mean ° "
+       "| Coverage mismatch % | Pareto | Image |\n";
+  s += "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|:-:|---|\n";
   std::vector<std::string> nonfinite;
   for (size_t i = 0; i < rows.size(); ++i) {
     const BenchRow& r = rows[i];
@@ -362,10 +372,14 @@ std::string markdown_text(const std::string& dir, const BenchReport& report, con
                            sig3(e.coverage_mismatch_fraction * 100));
       if (e.nonfinite_color_pixels) nonfinite.push_back(fmt::format("{} ({})", row_label(r), e.nonfinite_color_pixels));
     }
-    s += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", md_cell(r.backend),
-                     md_cell(r.quality), ms(r.cold_median_s), ms(r.cold_p95_s), ms(r.warm_median_s), ms(r.warm_p95_s),
-                     format_count(r.rays_per_second_per_core), format_bytes(double(r.bytes_read)), errors,
-                     on_front[i] ? "★" : "", image);
+    const bool cold = r.cold_runs > 0;
+    s += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", md_cell(r.backend),
+                     md_cell(r.quality), cold ? ms(r.cold_median_s) : "—",
+                     cold && std::isfinite(r.first_rmse) ? fmt::format("{:.4g}", r.first_rmse) : "—",
+                     std::isfinite(r.converged_median_s) ? ms(r.converged_median_s) : "—",
+                     std::isfinite(r.converged_median_s) ? std::to_string(r.converged_frames) : "—", ms(r.warm_median_s),
+                     ms(r.warm_p95_s), r.is_peer ? "—" : format_count(r.rays_per_second_per_core),
+                     r.is_peer ? "—" : format_bytes(double(r.bytes_read)), errors, on_front[i] ? "★" : "", image);
   }
   s += "\n";
   if (!nonfinite.empty()) {
@@ -373,10 +387,23 @@ std::string markdown_text(const std::string& dir, const BenchReport& report, con
     for (size_t i = 0; i < nonfinite.size(); ++i) s += (i ? ", " : " ") + md_cell(nonfinite[i]);
     s += " pixels; each counts as the largest error.\n\n";
   }
-  s += equal_error_markdown(equal_error);
+  s += equal_error_markdown(equal_error, BenchTime::warm);
+  s += equal_error_markdown(equal_error, BenchTime::converged);
+  std::string peers;
+  for (const BenchRow& r : rows)
+    if (r.is_peer)
+      peers += fmt::format("- **{}** {}: {}{}\n", md_cell(r.backend), md_cell(r.quality), md_cell(r.description),
+                           r.peak_rss_bytes ? fmt::format("; peak resident memory {}", format_bytes(double(r.peak_rss_bytes))) : "");
+  if (!peers.empty())
+    s += "## Peers\n\nOther programs' renderers on the same view, timed by the script that ran them (bench/peers); their "
+         "error is computed here from their colour images, against the same reference.\n\n" + peers + "\n";
   s += "Legend:\n\n"
-       "- **Cold**: a frame that starts with empty caches; **warm**: the same frame again with the caches filled. "
-       "Median and 95th percentile over the runs.\n"
+       "- **First frame**: the first frame from empty caches, and its RMSE: a back end that refines as its data "
+       "arrives shows a coarse or incomplete image first. **Converged**: the wall time from empty caches to the "
+       "converged image, the frames rendered one after another as they would be shown, each followed by the loads "
+       "it asked for; **Frames**: how many that took. **Warm**: the same frame again with the caches filled and "
+       "the image converged. Medians (and 95th percentile) over the runs; a peer's times are its first frame and "
+       "its steady frames.\n"
        "- **Rays/s/core**: primary rays per second per thread on a warm frame; **Read/frame**: bytes read from "
        "the store during a warm frame.\n"
        "- **RMSE**: root mean square difference of the R, G, B values (0 to 1) from the reference image; "
@@ -414,10 +441,14 @@ std::vector<size_t> pareto_front(const std::vector<BenchRow>& rows) {
   return front;
 }
 
-std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows) {
-  auto comparable = [](const BenchRow& r) {
-    return !r.is_reference && std::isfinite(r.warm_median_s) && r.warm_median_s > 0 && std::isfinite(r.error.rmse) &&
-           r.error.rmse > 0;
+double time_of(const BenchRow& r, BenchTime which) {
+  return which == BenchTime::warm ? r.warm_median_s : r.converged_median_s;
+}
+
+std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows, BenchTime which) {
+  auto t = [which](const BenchRow& r) { return time_of(r, which); };
+  auto comparable = [&](const BenchRow& r) {
+    return !r.is_reference && std::isfinite(t(r)) && t(r) > 0 && std::isfinite(r.error.rmse) && r.error.rmse > 0;
   };
   std::vector<std::string> backends;
   for (const BenchRow& r : rows)
@@ -429,7 +460,10 @@ std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows) {
     // only for identical rows).
     std::vector<BenchRow> own;
     for (const BenchRow& r : rows)
-      if (comparable(r) && r.backend == backend) own.push_back(r);
+      if (comparable(r) && r.backend == backend) {
+        own.push_back(r);
+        own.back().warm_median_s = t(r);  // pareto_front() ranks by warm time
+      }
     std::vector<const BenchRow*> curve;
     for (size_t i : pareto_front(own)) curve.push_back(&own[i]);
     std::sort(curve.begin(), curve.end(), [](const BenchRow* a, const BenchRow* b) {
@@ -441,7 +475,8 @@ std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows) {
         if (!comparable(r) || r.backend != against) continue;
         EqualErrorRow e;
         e.backend = backend, e.against = against, e.against_quality = r.quality;
-        e.rmse = r.error.rmse, e.against_time_s = r.warm_median_s;
+        e.rmse = r.error.rmse, e.against_time_s = t(r);
+        e.time = which;
         if (e.rmse >= curve.front()->error.rmse) {
           e.backend_time_s = curve.front()->warm_median_s;
           e.bound = e.rmse == curve.front()->error.rmse ? EqualErrorRow::Bound::interpolated : EqualErrorRow::Bound::at_most;
@@ -478,7 +513,8 @@ BenchReportPaths write_bench_report(const std::string& dir, const BenchReport& r
   BenchReportPaths paths;
   paths.csv = in_dir("bench.csv");
   write_text(paths.csv, csv_text(report, on_front));
-  const std::vector<EqualErrorRow> equal_error = equal_error_rows(report.rows);
+  std::vector<EqualErrorRow> equal_error = equal_error_rows(report.rows);
+  for (EqualErrorRow& e : equal_error_rows(report.rows, BenchTime::converged)) equal_error.push_back(std::move(e));
   paths.equal_error_csv = in_dir("equal-error.csv");
   write_text(paths.equal_error_csv, equal_error_csv_text(equal_error));
 

@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -24,11 +25,28 @@ struct BenchRow {
   std::string quality;          ///< human label of the knob setting, e.g. "step=0.5" ("" for none)
   double quality_value = 0;     ///< the knob's value: orders a back end's rows in the plot
   int width = 0, height = 0, threads = 0;
-  double cold_median_s = 0, cold_p95_s = 0, warm_median_s = 0, warm_p95_s = 0;
+  /// The first frame from empty caches (each cold run starts with new, empty caches): for a
+  /// back end that refines over frames, a coarse or incomplete image (see first_error).
+  double cold_median_s = 0, cold_p95_s = 0;
+  double warm_median_s = 0, warm_p95_s = 0;  ///< a frame again with the caches filled and the image converged
   int cold_runs = 0, warm_runs = 0;
+  /// From empty caches to the converged image, the wait a user starting cold has: the wall
+  /// time of the frames rendered one after another as they would be shown, each followed by
+  /// the loads it asked for, until the back end reports a converged frame (median over the
+  /// cold runs; NaN when there were none), and how many frames that took (1 when the first
+  /// frame is already complete).
+  double converged_median_s = std::numeric_limits<double>::quiet_NaN();
+  int converged_frames = 0;
   int settle_frames = 0;        ///< warm-up frames before the warm ones, completed at once where the back end can (RenderSession::Settle::complete)
-  ImageError error;             ///< against the reference frame
+  ImageError error;             ///< of the warm frame, against the reference frame
+  /// The first cold frame's RMSE and SSIM against the reference (NaN when there was no cold run).
+  double first_rmse = std::numeric_limits<double>::quiet_NaN(), first_ssim = std::numeric_limits<double>::quiet_NaN();
   bool is_reference = false;    ///< the truth itself: error 0 by definition
+  /// Another program's renderer (bench --peers): its times are its own, measured by the
+  /// script that ran it; its error is computed here, from its colour image, like every row's.
+  bool is_peer = false;
+  std::string description;      ///< what a peer row is (program, version, settings); "" for back ends
+  uint64_t peak_rss_bytes = 0;  ///< a peer's peak resident memory, as its script measured it (0: not measured)
   double rays_per_second_per_core = 0;
   uint64_t samples = 0, bricks = 0, bytes_read = 0;  ///< per warm frame
   std::string image;            ///< this row's colour PNG, relative to the report directory ("" for none)
@@ -38,6 +56,13 @@ struct BenchReport {
   std::string title;            ///< e.g. scene file name, dataset, image size, mode
   std::vector<BenchRow> rows;
 };
+
+/// @brief Which time of a row equal_error_rows() compares.
+enum class BenchTime {
+  warm,       ///< warm_median_s: the steady frame
+  converged,  ///< converged_median_s: from empty caches to the converged image
+};
+double time_of(const BenchRow& r, BenchTime which);
 
 /// @brief One back end's warm frame time at the error another back end reached in one of its
 /// rows: the two back ends compared at equal error.
@@ -56,6 +81,7 @@ struct EqualErrorRow {
   double against_time_s = 0;    ///< that row's warm median
   double backend_time_s = 0;    ///< backend's warm median at rmse, or its bound
   Bound bound = Bound::interpolated;
+  BenchTime time = BenchTime::warm;  ///< which time both sides are
   /// against_time_s / backend_time_s: above 1 where `backend` is faster (a lower bound when
   /// bound is at_most, an upper one when it is at_least).
   double speedup() const { return against_time_s / backend_time_s; }
@@ -66,7 +92,9 @@ struct EqualErrorRow {
 /// interpolated log-log along its own Pareto front (a power law of time in error is matched
 /// exactly), or bounded by its fastest or most accurate row outside the errors it reached.
 /// Rows without a positive, finite time and RMSE take no part.
-std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows);
+/// `which` picks the time compared: the warm frame (the default) or the time from empty caches
+/// to the converged image; the error is the warm frame's in both (the converged image's).
+std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows, BenchTime which = BenchTime::warm);
 
 /// @brief The files write_bench_report() wrote; an entry is empty when that file was not
 /// written (contact_sheet when no row's image exists).
@@ -96,12 +124,16 @@ std::vector<size_t> pareto_front(const std::vector<BenchRow>& rows);
 /// - DIR/contact-sheet.png: the rows' images in a grid, each titled "backend quality, time,
 ///   RMSE" (rows whose image is empty or missing are left out; not written when none is left);
 /// - DIR/equal-error.csv: equal_error_rows(), one line each (backend, against,
-///   against_quality, rmse, against_time_s, backend_time_s, time_bound, speedup; time_bound
-///   bounds backend_time_s, so at_most makes the speed-up a lower bound and at_least an upper one);
-/// - DIR/bench.md: title, a summary, the chart, a table (backend, quality, cold and warm
-///   median/p95 ms, rays/s/core, bytes read, RMSE, PSNR, SSIM, depth mean/p99 voxels, normal
-///   mean degrees, coverage mismatch %, Pareto mark, image link), the equal-error table when
-///   there are two back ends to compare, a legend and the contact sheet.
+///   against_quality, rmse, against_time_s, backend_time_s, time_bound, speedup, time; time_bound
+///   bounds backend_time_s, so at_most makes the speed-up a lower bound and at_least an upper one;
+///   time is "warm" for the steady frames and "converged" for the times from empty caches to
+///   the converged image, both sets written);
+/// - DIR/bench.md: title, a summary, the chart, a table (backend, quality, first cold frame
+///   median ms and RMSE, cold-to-converged median ms and frames, warm median/p95 ms,
+///   rays/s/core, bytes read, RMSE, PSNR, SSIM, depth mean/p99 voxels, normal mean degrees,
+///   coverage mismatch %, Pareto mark, image link), the equal-error tables (warm, and cold to
+///   converged) when there are two back ends to compare, the peers' descriptions, a legend and
+///   the contact sheet.
 /// The charts need gnuplot (package gnuplot-nox).
 /// A chart not drawn this time is removed if an earlier run left one, so the directory never
 /// mixes two runs.

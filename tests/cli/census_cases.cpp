@@ -594,6 +594,12 @@ void add_render_cases(std::vector<Case>& c) {
                "field '--quality': no back end benchmarked here has a parameter 'stepp'"});
   c.push_back({"render", "bench --quality without values", {}, bench + "--quality step --out $TMP/b", 2,
                "field '--quality': 'step' is not NAME=V1,V2,..."});
+  c.push_back({"render", "bench --peers with an empty list of steady times",
+               text("peers.json", R"({"peers": [{"name": "vtk", "first_frame_s": 0.5, "steady_s": [], "image": "v.png"}]})"),
+               bench + "--peers $TMP/peers.json --out $TMP/b", 1, "$TMP/peers.json: field 'peers[0].steady_s'"});
+  c.push_back({"render", "bench --peers image missing",
+               text("peers2.json", R"({"peers": [{"name": "vtk", "first_frame_s": 0.5, "steady_s": [0.1], "image": "none.png"}]})"),
+               bench + "--peers $TMP/peers2.json --out $TMP/b", 1, "$TMP/none.png: no such image"});
   c.push_back({"render", "bench --reference-supersample even", {}, bench + "--reference-supersample 2 --out $TMP/b", 2,
                "field '--reference-supersample': 2 must be odd"});
   c.push_back({"render", "bench --reference-supersample too large", {}, bench + "--reference-supersample 1025 --out $TMP/b", 2,

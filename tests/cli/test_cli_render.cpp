@@ -271,6 +271,56 @@ TEST_F(CliRender, ListBackendsNamesEveryBackEndWithItsParameters) {
   EXPECT_THAT(r.output, HasSubstr("bench sweeps step = "));
 }
 
+TEST_F(CliRender, BenchReportsFirstFrameConvergenceAndPeersBesideTheBackEnds) {
+  testing::TempDir out;
+  const std::string scene = write_scene("bench-peers.json", R"("image": {"width": 32, "height": 24}, )" + kCamera + ", " + kIso);
+  // A peer whose image is a flat colour, and one that is the reference's own image (error 0).
+  ImageRGBA8 flat(32, 24, Rgba8{10, 20, 30, 255});
+  write_png(out.file("flat.png"), flat);
+  std::ofstream(out.file("peers.json")) << R"({"peers": [
+      {"name": "flat", "quality": "q=1", "threads": 2, "first_frame_s": 0.5, "steady_s": [0.2, 0.3, 0.25],
+       "image": "flat.png", "description": "a flat colour", "peak_rss_bytes": 1048576}]})";
+  const std::string report = out.file("report");
+  auto r = brickyard("-q bench " + scene + " --backends raymarch,gigavoxels --quality step=1 --quality lod_ratio=1 "
+                     "--warm 1 --cold 1 --peers " + out.file("peers.json") + " --out " + report);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::vector<std::string> csv = lines_of(testing::read_file(report + "/bench.csv"));
+  ASSERT_EQ(csv.size(), 5u) << testing::read_file(report + "/bench.csv");  // header, reference, 2 back ends, the peer
+  const std::vector<std::string> header = fields_of(csv[0]);
+  auto cell = [&](size_t line, const std::string& name) {
+    const auto at = std::find(header.begin(), header.end(), name);
+    EXPECT_NE(at, header.end()) << name;
+    return fields_of(csv[line]).at(size_t(at - header.begin()));
+  };
+  EXPECT_EQ(cell(2, "backend"), "raymarch");
+  EXPECT_EQ(cell(2, "converged_frames"), "1");  // complete at once
+  EXPECT_EQ(cell(3, "backend"), "gigavoxels");
+  EXPECT_GT(std::stoi(cell(3, "converged_frames")), 1);  // refines from empty caches
+  EXPECT_GE(std::stod(cell(3, "converged_median_s")), std::stod(cell(3, "cold_median_s")));
+  EXPECT_GT(std::stod(cell(3, "first_rmse")), std::stod(cell(3, "rmse")));  // the first image is coarser
+  EXPECT_EQ(cell(4, "backend"), "flat");
+  EXPECT_EQ(cell(4, "is_peer"), "1");
+  EXPECT_EQ(cell(4, "warm_median_s"), "0.25");
+  EXPECT_EQ(cell(4, "converged_median_s"), "0.5");
+  EXPECT_GT(std::stod(cell(4, "rmse")), 0.01);
+  EXPECT_TRUE(fs::exists(report + "/images/peer-flat-q_1.png"));
+  const std::string md = testing::read_file(report + "/bench.md");
+  EXPECT_THAT(md, HasSubstr("**flat** q=1: a flat colour; peak resident memory 1 MiB"));
+  EXPECT_THAT(md, HasSubstr("## At equal error: from empty caches to the converged image"));
+
+  // A peer file with a bad key fails before anything is rendered, naming it.
+  std::ofstream(out.file("bad.json")) << R"({"peers": [{"name": "flat", "first_frame_s": 0.5, "steady_s": [], "image": "flat.png"}]})";
+  r = brickyard("-q bench " + scene + " --backends raymarch --peers " + out.file("bad.json") + " --out " + out.file("bad"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("peers[0].steady_s"));
+  EXPECT_FALSE(fs::exists(out.file("bad") + "/bench.csv"));
+  // A peer named like a back end would mix two rows' meanings.
+  std::ofstream(out.file("clash.json")) << R"({"peers": [{"name": "raymarch", "first_frame_s": 0.5, "steady_s": [0.1], "image": "flat.png"}]})";
+  r = brickyard("-q bench " + scene + " --backends raymarch --peers " + out.file("clash.json") + " --out " + out.file("clash"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("back end's name"));
+}
+
 TEST_F(CliRender, BenchWritesTableReportImagesAndCharts) {
   testing::TempDir out;
   const std::string scene = write_scene("bench.json", R"("image": {"width": 64, "height": 64}, )" + kCamera + ", " + kIso);

@@ -240,9 +240,10 @@ TEST(BenchReport, EqualErrorIsWrittenAsCsvAndAMarkdownTable) {
   const auto records = parse_csv(testing::read_file(dir.file("equal-error.csv")));
   ASSERT_EQ(records.size(), eq.size() + 1);
   EXPECT_EQ(records[0], (std::vector<std::string>{"backend", "against", "against_quality", "rmse", "against_time_s",
-                                                   "backend_time_s", "time_bound", "speedup"}));
+                                                   "backend_time_s", "time_bound", "speedup", "time"}));
   for (size_t i = 1; i < records.size(); ++i) {
-    ASSERT_EQ(records[i].size(), 8u);
+    ASSERT_EQ(records[i].size(), 9u);
+    EXPECT_EQ(records[i][8], "warm");  // the sample's rows have no cold runs: no converged times
     EXPECT_EQ(records[i][6], i == 1 ? "interpolated" : i == 2 ? "at_most" : "at_least") << i;
     EXPECT_DOUBLE_EQ(std::stod(records[i][7]), eq[i - 1].speedup());
   }
@@ -286,7 +287,7 @@ TEST(BenchReport, CsvHasEveryColumnOnEveryLineAndQuotesLabels) {
   const auto records = parse_csv(testing::read_file(dir.file("out/bench.csv")));
   ASSERT_EQ(records.size(), report.rows.size() + 1);
   const size_t columns = records[0].size();
-  EXPECT_EQ(columns, 33u);
+  EXPECT_EQ(columns, 40u);
   for (const auto& r : records) EXPECT_EQ(r.size(), columns);
   auto column = [&](const std::string& name) {
     return size_t(std::find(records[0].begin(), records[0].end(), name) - records[0].begin());
@@ -484,6 +485,83 @@ TEST(RunGnuplot, WritesToPathsWithSpacesAndQuotes) {
   EXPECT_EQ(image.width(), 320);
   EXPECT_EQ(image.height(), 200);
   EXPECT_FALSE(has_partial_files(dir.path()));
+}
+
+}  // namespace
+}  // namespace brickyard
+
+namespace brickyard {
+namespace {
+
+TEST(BenchReport, ComparesTimesFromEmptyCachesToTheConvergedImage) {
+  // "lod" converges in several frames (slow from cold) but is fast warm; "march" converges at
+  // once. At equal error the warm comparison favours lod, the converged one march.
+  std::vector<BenchRow> rows = {row("lod", "q=1", 1, 0.010, 0.02), row("march", "q=1", 1, 0.030, 0.02)};
+  rows[0].converged_median_s = 0.300, rows[0].converged_frames = 9;
+  rows[1].converged_median_s = 0.040, rows[1].converged_frames = 1;
+  const std::vector<EqualErrorRow> warm = equal_error_rows(rows);
+  const std::vector<EqualErrorRow> cold = equal_error_rows(rows, BenchTime::converged);
+  ASSERT_EQ(warm.size(), 2u);
+  ASSERT_EQ(cold.size(), 2u);
+  EXPECT_EQ(warm[0].backend, "lod");
+  EXPECT_DOUBLE_EQ(warm[0].speedup(), 3.0);
+  EXPECT_EQ(warm[0].time, BenchTime::warm);
+  EXPECT_EQ(cold[0].backend, "lod");
+  EXPECT_DOUBLE_EQ(cold[0].backend_time_s, 0.300);
+  EXPECT_DOUBLE_EQ(cold[0].speedup(), 0.040 / 0.300);
+  EXPECT_EQ(cold[0].time, BenchTime::converged);
+  // A row without cold runs (NaN) takes no part in the converged comparison.
+  rows[1].converged_median_s = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_TRUE(equal_error_rows(rows, BenchTime::converged).empty());
+  EXPECT_EQ(equal_error_rows(rows).size(), 2u);
+}
+
+TEST(BenchReport, WritesFirstFrameConvergedAndPeerColumns) {
+  testing::TempDir dir;
+  BenchReport report = sample_report(dir);
+  report.rows[1].cold_runs = 3, report.rows[1].cold_median_s = 0.004;
+  report.rows[1].first_rmse = 0.21, report.rows[1].first_ssim = 0.5;
+  report.rows[1].converged_median_s = 0.25, report.rows[1].converged_frames = 7;
+  report.rows[2].converged_median_s = 0.03, report.rows[2].converged_frames = 1;
+  BenchRow peer = row("vtk-fixed-point", "sample=1", 1, 0.15, 0.03);
+  peer.is_peer = true, peer.description = "VTK 9.1 vtkFixedPointVolumeRayCastMapper, 2 threads";
+  peer.peak_rss_bytes = uint64_t(3) << 30;
+  peer.cold_runs = 1, peer.cold_median_s = peer.converged_median_s = 0.5, peer.converged_frames = 1;
+  report.rows.push_back(peer);
+  try {
+    write_bench_report(dir.path().string(), report);
+  } catch (const Error& e) {
+    ASSERT_EQ(e.code(), Errc::unsupported) << e.what();
+  }
+  const auto records = parse_csv(testing::read_file(dir.file("bench.csv")));
+  ASSERT_EQ(records.size(), report.rows.size() + 1);
+  auto column = [&](const std::string& name) {
+    const auto at = std::find(records[0].begin(), records[0].end(), name);
+    EXPECT_NE(at, records[0].end()) << name;
+    return size_t(at - records[0].begin());
+  };
+  EXPECT_EQ(records[2][column("first_rmse")], "0.21");
+  EXPECT_EQ(records[2][column("converged_median_s")], "0.25");
+  EXPECT_EQ(records[2][column("converged_frames")], "7");
+  EXPECT_EQ(records[2][column("is_peer")], "0");
+  EXPECT_EQ(records[4][column("converged_median_s")], "nan");  // no cold runs: not measured
+  const auto& p = records.back();
+  EXPECT_EQ(p[column("backend")], "vtk-fixed-point");
+  EXPECT_EQ(p[column("is_peer")], "1");
+  EXPECT_EQ(p[column("peak_rss_bytes")], std::to_string(uint64_t(3) << 30));
+  EXPECT_EQ(p[column("description")], "VTK 9.1 vtkFixedPointVolumeRayCastMapper, 2 threads");
+  for (const auto& r : records) EXPECT_EQ(r.size(), records[0].size());
+
+  const std::string md = testing::read_file(dir.file("bench.md"));
+  EXPECT_NE(md.find("| raymarch | step=1, lod=1 | 4.00 | 0.21 | 250 | 7 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("## At equal error: from empty caches to the converged image"), std::string::npos) << md;
+  EXPECT_NE(md.find("## Peers"), std::string::npos) << md;
+  EXPECT_NE(md.find("**vtk-fixed-point** sample=1: VTK 9.1 vtkFixedPointVolumeRayCastMapper, 2 threads; peak resident "
+                    "memory 3 GiB"),
+            std::string::npos)
+      << md;
+  const auto eq = parse_csv(testing::read_file(dir.file("equal-error.csv")));
+  EXPECT_TRUE(std::any_of(eq.begin(), eq.end(), [](const std::vector<std::string>& r) { return r.back() == "converged"; }));
 }
 
 }  // namespace
