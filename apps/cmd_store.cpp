@@ -62,10 +62,10 @@ struct ImportOptions {
   std::string series;
   // build
   int brick_size = 32, apron = 1, hc_level = 9;
-  std::string codec = "lz4", downsample = "average", nonfinite = "reject", range, map_size, transaction_size;
+  std::string codec = "lz4", downsample = "auto", nonfinite = "reject", range, map_size, transaction_size;
   std::string background, convert;
   double constant_tolerance = 0, checkpoint_seconds = 5;
-  bool no_shuffle = false, no_map_growth = false, force = false, octree = false, no_disk_check = false;
+  bool no_shuffle = false, no_map_growth = false, force = false, octree = false, no_disk_check = false, level_set = false;
   // meshes
   MeshImportOptions mesh;
   std::vector<std::string> given;  ///< the options on the command line, by their long names
@@ -240,7 +240,17 @@ void run_import(const ImportOptions& o) {
   else throw Error(Errc::invalid_argument, fmt::format("unknown codec '{}' (expected lz4 or lz4hc)", o.codec)).with_field("--codec");
   b.hc_level = o.hc_level;
   b.shuffle = !o.no_shuffle;
-  b.downsample = parse_downsample(o.downsample);
+  b.level_set = o.level_set;
+  if (o.downsample != "auto") {
+    b.downsample = parse_downsample(o.downsample);
+    if (o.level_set && b.downsample != Downsample::min)
+      throw Error(Errc::invalid_argument, fmt::format("--level-set keeps the zero crossing with the minimum of each "
+                                                      "2x2x2 block; --downsample {} would lose thin parts",
+                                                      o.downsample))
+          .with_field("--downsample");
+  }
+  if ((o.level_set || source->is_level_set()) && !b.downsample)
+    std::cout << "level set: coarser levels keep the zero crossing (--downsample min)\n";
   b.nonfinite = parse_nonfinite(o.nonfinite);
   b.constant_tolerance = o.constant_tolerance;
   if (!(o.checkpoint_seconds >= 0))
@@ -602,8 +612,14 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("--codec", o->codec, "lz4 (fast) or lz4hc (smaller, slower to build)")->capture_default_str()->group(build);
     cmd->add_option("--hc-level", o->hc_level, "LZ4-HC level 1..12")->capture_default_str()->group(build);
     cmd->add_flag("--no-shuffle", o->no_shuffle, "Do not byte-shuffle u16/f32 bricks before compression")->group(build);
-    cmd->add_option("--downsample", o->downsample, "Coarser levels: average, min or max of each 2x2x2 block")
+    cmd->add_option("--downsample", o->downsample,
+                    "Coarser levels: average, min or max of each 2x2x2 block; auto: min for level sets (a VDB of class "
+                    "level set, or --level-set), else average")
         ->capture_default_str()->group(build);
+    cmd->add_flag("--level-set", o->level_set,
+                  "The volume is a signed distance, negative inside: coarser levels keep its zero crossing (min), so "
+                  "thin parts survive at every level of detail (a VDB level set is one already)")
+        ->group(build);
     cmd->add_option("--constant-tolerance", o->constant_tolerance, "Store a brick as constant when max - min <= this")
         ->capture_default_str()->group(build);
     cmd->add_option("--background", o->background,

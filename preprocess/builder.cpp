@@ -55,7 +55,7 @@ Downsample parse_downsample(std::string_view s) {
   if (s == "average") return Downsample::average;
   if (s == "min") return Downsample::min;
   if (s == "max") return Downsample::max;
-  throw Error(Errc::invalid_argument, fmt::format("unknown filter '{}' (expected average, min or max)", s))
+  throw Error(Errc::invalid_argument, fmt::format("unknown filter '{}' (expected auto, average, min or max)", s))
       .with_field("--downsample");
 }
 
@@ -499,7 +499,7 @@ std::string build_params_json(const BuildOptions& o, double source_background) {
                       {"codec", std::string(to_string(o.codec))},
                       {"hc_level", o.hc_level},
                       {"shuffle", o.shuffle},
-                      {"downsample", std::string(to_string(o.downsample))},
+                      {"downsample", std::string(to_string(o.downsample.value_or(Downsample::average)))},
                       {"constant_tolerance", o.constant_tolerance},
                       {"nonfinite", std::string(to_string(o.nonfinite))},
                       {"background", o.background_auto ? nlohmann::json("auto")
@@ -507,6 +507,7 @@ std::string build_params_json(const BuildOptions& o, double source_background) {
   j["clamp"] = o.clamp ? nlohmann::json{o.clamp->first, o.clamp->second} : nlohmann::json(nullptr);
   // Recorded only when it applies, so that stores built before it stay up to date.
   if (o.background || o.background_auto) j["flatten"] = "background";
+  if (o.level_set) j["level_set"] = true;
   return j.dump();
 }
 
@@ -686,8 +687,14 @@ ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const Buil
   return needs;
 }
 
-BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options, Progress* progress) {
-  validate(options);
+BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& given, Progress* progress) {
+  validate(given);
+  BuildOptions options = given;
+  options.level_set = given.level_set || source.is_level_set();
+  // A level set's thin parts (a one-voxel shell) average away at coarser levels, where
+  // level-of-detail renderers would lose them; the minimum of the signed distance keeps every
+  // block that holds some inside, dilating the surface by at most a voxel of that level.
+  if (!options.downsample) options.downsample = options.level_set ? Downsample::min : Downsample::average;
   if (const std::string problem = spacing_problem(source.spacing()); !problem.empty())
     throw Error(Errc::format, problem).with_file(source.name()).with_field("spacing");
   Stopwatch watch;
@@ -718,7 +725,7 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   ctx.format = format;
   ctx.layout = layout;
   ctx.nodes = NodeTable(layout);
-  ctx.downsample = options.downsample;
+  ctx.downsample = *options.downsample;
   ctx.tolerance = options.constant_tolerance;
   ctx.flatten_background_only = options.background.has_value() || options.background_auto;
   const BuildIdentity identity{source_json, build_json};

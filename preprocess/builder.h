@@ -42,7 +42,11 @@ struct BuildOptions {
   Codec codec = Codec::lz4;
   int hc_level = 9;
   bool shuffle = true;
-  Downsample downsample = Downsample::average;
+  /// How coarser levels are made; unset: Downsample::min for level sets, else average.
+  std::optional<Downsample> downsample;
+  /// The data is a level set (`--level-set`; a source whose is_level_set() says so is one
+  /// anyway): recorded in the build, and coarser levels keep its zero crossing by default.
+  bool level_set = false;
   /// Without a background given, a brick is constant (stored without payload, at the middle of
   /// its range) when max - min over its voxels, apron included, is at most this; with one, only
   /// a brick whose every voxel lies within this of the background is, at the background (empty),

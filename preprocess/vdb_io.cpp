@@ -151,6 +151,7 @@ class VdbSource final : public VolumeSource {
   Vec3d spacing() const override { return spacing_; }
   Vec3d origin() const override { return origin_; }
   double background() const override { return background_; }
+  bool is_level_set() const override { return grid_->getGridClass() == vdb::GRID_LEVEL_SET; }
   bool may_contain_nonfinite() const override { return floating_; }
   uint64_t input_bytes() const override { return file_.bytes; }
 

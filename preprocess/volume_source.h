@@ -30,6 +30,9 @@ class VolumeSource {
   /// @brief The value of space the source does not describe (OpenVDB's background); constant
   /// bricks at this value are flagged empty.
   virtual double background() const { return 0.0; }
+  /// @brief Whether the data is a level set (a signed distance, negative inside): its coarser
+  /// levels then keep the zero crossing by default (Downsample::min), so thin parts survive.
+  virtual bool is_level_set() const { return false; }
   /// @brief Bounds of the stored values when known without reading the data (stored units).
   virtual std::optional<ValueRange> value_range_hint() const { return std::nullopt; }
   /// @brief Whether the data may hold NaN or infinities (f32 files may; fields never do).

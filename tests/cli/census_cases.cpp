@@ -206,6 +206,9 @@ void add_import_cases(std::vector<Case>& c) {
                "field '--apron': apron 5 is outside [0, 4]"});
   c.push_back({"import", "unknown --downsample", {}, "brickyard import " + raw16 + " --downsample median --out $TMP/i.store", 2,
                "field '--downsample': unknown filter 'median'"});
+  c.push_back({"import", "--level-set with averaged levels", {},
+               "brickyard import " + raw16 + " --level-set --downsample average --out $TMP/i.store", 2,
+               "field '--downsample': --level-set keeps the zero crossing"});
   c.push_back({"import", "unknown --nonfinite", {}, "brickyard import " + raw16 + " --nonfinite ignore --out $TMP/i.store", 2,
                "field '--nonfinite': unknown repair 'ignore'"});
   c.push_back({"import", "--range with LO > HI", {}, "brickyard import " + raw16 + " --range 5,1 --out $TMP/i.store", 2,

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -15,9 +16,12 @@
 #include <openvdb/io/File.h>
 #include <openvdb/tools/LevelSetSphere.h>
 #include <openvdb/tools/LevelSetUtil.h>
+#include <openvdb/tools/MeshToVolume.h>
+#include <openvdb/tools/ValueTransformer.h>
 #include <tbb/global_control.h>
 
 #include "core/error.h"
+#include "core/math.h"
 #include "fields/field.h"
 #include "preprocess/builder.h"
 #include "preprocess/export.h"
@@ -272,8 +276,9 @@ TEST(VdbExport, LevelSetRoundTripKeepsActiveVoxelsBackgroundAndClass) {
     EXPECT_NEAR((a - b).length(), 0.0, 1e-9) << ijk;
   }
 
-  // A coarser level: voxel i is the mean of the finest voxels 2i and 2i+1 along each axis,
-  // placed at their centre; index coordinates are the source's halved.
+  // A coarser level: voxel i is the minimum of the finest voxels 2i and 2i+1 along each axis
+  // (a level set's default, which keeps its zero crossing), placed at their centre; index
+  // coordinates are the source's halved.
   const int coarse = finest - 1;
   export_vdb(store, coarse, export_region(store, coarse, std::nullopt), dir.file("coarse.vdb"), "half");
   vdb::io::File coarse_file(dir.file("coarse.vdb"));
@@ -299,9 +304,9 @@ TEST(VdbExport, LevelSetRoundTripKeepsActiveVoxelsBackgroundAndClass) {
               v[n++] = fine.getValue(index_min + vdb::Coord(int32_t(std::min(2 * x + dx, fd.x - 1)),
                                                             int32_t(std::min(2 * y + dy, fd.y - 1)),
                                                             int32_t(std::min(2 * z + dz, fd.z - 1))));
-        const float mean = ((v[0] + v[1]) + (v[2] + v[3]) + (v[4] + v[5]) + (v[6] + v[7])) * 0.125f;
+        const float least = *std::min_element(v, v + 8);
         const vdb::Coord ijk = half_min + vdb::Coord(int32_t(x), int32_t(y), int32_t(z));
-        ASSERT_NEAR(coarse_acc.getValue(ijk), mean, 1e-6f) << ijk;
+        ASSERT_EQ(coarse_acc.getValue(ijk), least) << ijk;
         ASSERT_EQ(coarse_acc.isValueOn(ijk), std::abs(coarse_acc.getValue(ijk)) != bg) << ijk;
         active += coarse_acc.isValueOn(ijk);
         if (2 * x + 1 < fd.x && 2 * y + 1 < fd.y && 2 * z + 1 < fd.z) {
@@ -312,6 +317,69 @@ TEST(VdbExport, LevelSetRoundTripKeepsActiveVoxelsBackgroundAndClass) {
         }
       }
   EXPECT_GT(active, 0);
+}
+
+// A one-voxel-thick open shell made a level set with OpenVDB's own tools: the unsigned
+// distance to a hemisphere's triangles (meshToUnsignedDistanceField), less half a voxel, so
+// that the inside is the voxels within half a voxel of the surface.
+vdb::FloatGrid::Ptr thin_open_shell(double radius_voxels) {
+  vdb::initialize();
+  std::vector<vdb::Vec3s> points;
+  std::vector<vdb::Vec3I> triangles;
+  const int rings = 24, sectors = 48;
+  for (int i = 0; i <= rings; ++i)  // from the pole (i = 0) to the rim (i = rings), at z >= 0
+    for (int j = 0; j < sectors; ++j) {
+      const double theta = 0.5 * kPi * i / rings, phi = 2 * kPi * j / sectors;
+      points.emplace_back(float(radius_voxels * std::sin(theta) * std::cos(phi)),
+                          float(radius_voxels * std::sin(theta) * std::sin(phi)), float(radius_voxels * std::cos(theta)));
+    }
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < sectors; ++j) {
+      const unsigned a = unsigned(i * sectors + j), b = unsigned(i * sectors + (j + 1) % sectors);
+      triangles.emplace_back(a, b, a + sectors);
+      triangles.emplace_back(b, b + sectors, a + sectors);
+    }
+  const auto xform = vdb::math::Transform::createLinearTransform(1.0);
+  auto grid = vdb::tools::meshToUnsignedDistanceField<vdb::FloatGrid>(*xform, points, triangles, {}, 3.0f);
+  vdb::tools::foreach (grid->beginValueAll(), [](const vdb::FloatGrid::ValueAllIter& it) { it.setValue(*it - 0.5f); });
+  grid->tree().root().setBackground(grid->background() - 0.5f, true);
+  grid->setGridClass(vdb::GRID_LEVEL_SET);
+  grid->setName("shell");
+  return grid;
+}
+
+TEST(VdbImport, LevelSetsKeepThinPartsAtCoarserLevels) {
+  testing::TempDir dir;
+  auto grid = thin_open_shell(24.0);
+  write_grids(dir.file("shell.vdb"), {grid});
+  auto source = open_vdb_source(dir.file("shell.vdb"), "");
+  EXPECT_TRUE(source->is_level_set());
+  build_store(*source, dir.file("min.store"), bricks_of(16));  // the default for a level set: min
+  BuildOptions averaged = bricks_of(16);
+  averaged.downsample = Downsample::average;
+  build_store(*open_vdb_source(dir.file("shell.vdb"), ""), dir.file("avg.store"), averaged);
+  Store min(dir.file("min.store")), avg(dir.file("avg.store"));
+  EXPECT_TRUE(contains(min.manifest().build, "\"downsample\":\"min\"")) << min.manifest().build;
+  EXPECT_TRUE(contains(min.manifest().build, "\"level_set\":true")) << min.manifest().build;
+  EXPECT_TRUE(contains(avg.manifest().build, "\"downsample\":\"average\"")) << avg.manifest().build;
+  // The finest levels are the grid itself; the next two keep the shell under min and lose most
+  // of it under averaging. The shell's area, 2 pi r^2 in voxels of a level, bounds what a
+  // one-voxel layer holds from below.
+  expect_store_holds_grid(min, *grid);
+  for (int step = 1; step <= 2; ++step) {
+    const int level = min.layout().finest() - step;
+    auto inside = [&](const Store& s) {
+      int64_t n = 0;
+      for_each_region_slab(s, level, export_region(s, level, std::nullopt), [&](int64_t, int64_t, std::span<const std::byte> b) {
+        const float* p = reinterpret_cast<const float*>(b.data());
+        for (size_t i = 0; i < b.size() / sizeof(float); ++i) n += p[i] < 0;
+      });
+      return n;
+    };
+    const double r = 24.0 / double(1 << step);
+    EXPECT_GT(double(inside(min)), 0.9 * 2 * kPi * r * r) << "level " << level;
+    EXPECT_LT(double(inside(avg)), 0.5 * double(inside(min))) << "level " << level;
+  }
 }
 
 TEST(VdbImport, DoubleAndInt32GridsConvertToFloat) {
