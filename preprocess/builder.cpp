@@ -704,6 +704,9 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
   const std::string build_json = build_params_json(options, source.background());
 
   StoreBuildTarget target(dir, source_json, build_json, options.force, result, options.octree.has_value());
+  // A rerun (up to date, or resuming a killed build) of a file checked then and unchanged
+  // since need not read all of it again first: 2 s of an 8 GiB file's 5 s resumption.
+  if (!target.source_checked_before(source_json)) source.verify_content();
   if (target.up_to_date()) {
     result.up_to_date = true;
     return result;

@@ -140,6 +140,10 @@ class StoreBuildTarget {
   /// @brief The state of an interrupted build of this same import found in place (an incomplete
   /// store whose checkpoint has the same source and parameters): the build resumes from it.
   std::optional<std::vector<std::byte>>& resume_state() { return resume_state_; }
+  /// @brief Whether the store or checkpoint in place was built from this same file, checked
+  /// then and unchanged since (VolumeSource::verify_content() need not run again): the same
+  /// path, size and checksum, and the same "checked_mtime_ns".
+  bool source_checked_before(const std::string& source_json) const;
   /// @brief The directory to build in: `dir`, or the rebuild beside it.
   const std::string& path() const { return path_; }
   /// @brief The store's write lock, held until this target is destroyed.
@@ -153,6 +157,7 @@ class StoreBuildTarget {
 
   StoreWriteLock lock_;
   std::string dir_, real_, path_, rebuilding_, replaced_;
+  std::string previous_source_;  // the source description of the store or checkpoint in place
   bool up_to_date_ = false, beside_ = false, committed_ = false;
   std::optional<std::vector<std::byte>> resume_state_;
 };

@@ -70,7 +70,6 @@ class RawSource final : public VolumeSource {
     }
     ::madvise(map, size_, MADV_SEQUENTIAL);
     map_ = static_cast<const std::byte*>(map);
-    if (spec.xxh3_64) check_checksum(*spec.xxh3_64);
     if (!is_native(spec.type)) measure_conversion();
   }
   ~RawSource() override {
@@ -123,20 +122,25 @@ class RawSource final : public VolumeSource {
                         {"endianness", spec_.little_endian ? "little" : "big"}};
     if (!is_native(spec_.type)) j["element_type"] = std::string(to_string(spec_.type));
     if (conversion_) j["conversion"] = nlohmann::json::parse(conversion_->to_json());
-    if (spec_.xxh3_64) j["xxh3_64"] = fmt::format("{:016x}", *spec_.xxh3_64);
-    else j["mtime_ns"] = mtime_ns_;
+    if (spec_.xxh3_64) {
+      j["xxh3_64"] = fmt::format("{:016x}", *spec_.xxh3_64);
+      // Which file the checksum was checked on: a rerun of an import finds it in the store or
+      // checkpoint in place and need not hash the file again (verify_content()).
+      j["checked_mtime_ns"] = mtime_ns_;
+    } else {
+      j["mtime_ns"] = mtime_ns_;
+    }
     if (!spec_.generator_json.empty()) j["generator"] = nlohmann::json::parse(spec_.generator_json);
     return j.dump();
   }
 
- private:
   /// The sidecar's checksum against the file, before anything is built from it: a file
   /// rewritten or damaged since its sidecar would otherwise import as if it were the original.
-  void check_checksum(uint64_t expected) {
+  void verify_content() override {
+    if (!spec_.xxh3_64) return;
+    const uint64_t expected = *spec_.xxh3_64;
     const uint64_t actual = XXH3_64bits(map_, size_);
     if (actual == expected) return;
-    ::munmap(const_cast<std::byte*>(map_), size_);
-    ::close(fd_);
     throw Error(Errc::format, fmt::format("the file's XXH3-64 is {:016x}, its sidecar {}.json says {:016x}: the file "
                                           "changed since the sidecar was written (describe it with --dims and "
                                           "--type to import it as it is now)",
@@ -144,6 +148,8 @@ class RawSource final : public VolumeSource {
         .with_file(path_)
         .with_field("xxh3_64");
   }
+
+ private:
 
   /// One pass over the file before anything is built: a conversion that would change values
   /// is refused (check_conversion) before the store is touched.

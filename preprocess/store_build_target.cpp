@@ -27,14 +27,14 @@ namespace fs = std::filesystem;
 // identity: stores built before it was recorded stay up to date.
 std::string source_identity(const std::string& json) {
   nlohmann::json j = nlohmann::json::parse(json);
-  if (j.is_object()) j.erase("generator");
+  if (j.is_object()) j.erase("generator"), j.erase("checked_mtime_ns");
   return j.dump();
 }
 
 /// The checkpoint an interrupted build of this same import left (same source, same parameters,
 /// same checkpoint format), to resume from; anything else is started over.
 std::optional<std::vector<std::byte>> resumable_state(const std::string& dir, const std::string& source_json,
-                                                      const std::string& build_json) {
+                                                      const std::string& build_json, std::string& checkpoint_source) {
   try {
     auto state = read_build_checkpoint(dir);
     if (!state) return std::nullopt;
@@ -42,6 +42,7 @@ std::optional<std::vector<std::byte>> resumable_state(const std::string& dir, co
     const auto id = get_identity(r);
     if (!id || source_identity(id->source_json) != source_identity(source_json) || id->build_json != build_json)
       return std::nullopt;
+    checkpoint_source = id->source_json;
     return state;
   } catch (const Error&) {
     return std::nullopt;  // unreadable: the build starts over, as before checkpoints
@@ -93,12 +94,13 @@ StoreBuildTarget::StoreBuildTarget(const std::string& dir, const std::string& so
     case StoreState::not_a_store:
       throw Error(Errc::invalid_argument, "exists and is not a brickyard store; refusing to overwrite it").with_file(dir);
     case StoreState::incomplete:
-      if (!publish_whole && (resume_state_ = resumable_state(dir, source_json, build_json))) break;
+      if (!publish_whole && (resume_state_ = resumable_state(dir, source_json, build_json, previous_source_))) break;
       result.rebuilt_incomplete = true;
       remove_store_files(dir);
       break;
     case StoreState::complete: {
       const Manifest old = read_manifest(dir);
+      previous_source_ = old.source;
       if (source_identity(old.source) == source_identity(source_json) && old.build == build_json && !force) {
         result.manifest = old;
         up_to_date_ = true;
@@ -128,6 +130,19 @@ StoreBuildTarget::StoreBuildTarget(const std::string& dir, const std::string& so
       beside_ = true;
       path_ = rebuilding_;
     }
+  }
+}
+
+bool StoreBuildTarget::source_checked_before(const std::string& source_json) const {
+  if (previous_source_.empty()) return false;
+  try {
+    const nlohmann::json before = nlohmann::json::parse(previous_source_), now = nlohmann::json::parse(source_json);
+    if (!before.is_object() || !now.is_object() || !now.contains("checked_mtime_ns")) return false;
+    for (const char* key : {"kind", "path", "bytes", "xxh3_64", "checked_mtime_ns"})
+      if (before.value(key, nlohmann::json()) != now.value(key, nlohmann::json())) return false;
+    return true;
+  } catch (const nlohmann::json::exception&) {
+    return false;
   }
 }
 

@@ -33,6 +33,11 @@ class VolumeSource {
   /// @brief Whether the data is a level set (a signed distance, negative inside): its coarser
   /// levels then keep the zero crossing by default (Downsample::min), so thin parts survive.
   virtual bool is_level_set() const { return false; }
+  /// @brief Checks the data against what describes it before a build reads it (a raw file
+  /// against its sidecar's checksum: a whole pass over the file); Error naming the file when
+  /// they differ. build_store calls it unless the store or checkpoint in place was built from
+  /// this file unchanged since (the same "checked_mtime_ns" in its source description).
+  virtual void verify_content() {}
   /// @brief Bounds of the stored values when known without reading the data (stored units).
   virtual std::optional<ValueRange> value_range_hint() const { return std::nullopt; }
   /// @brief Whether the data may hold NaN or infinities (f32 files may; fields never do).

@@ -6,6 +6,9 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <fstream>
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <limits>
 #include <memory>
 #include <string>
@@ -14,6 +17,8 @@
 #include "core/error.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
+#include "core/raw_volume.h"
+#include "fields/grid.h"
 #include "storage/lmdb_env.h"
 #include "storage/store.h"
 #include "test_util.h"
@@ -74,6 +79,74 @@ void expect_same_store(const std::string& a, const std::string& b) {
   EXPECT_TRUE(testing::all_records(Store(a)) == testing::all_records(Store(b)));
   EXPECT_EQ(Store(a).manifest().to_json(), Store(b).manifest().to_json());
   EXPECT_TRUE(Store(a).nodes().level(0) == Store(b).nodes().level(0));
+}
+
+/// A raw file's source, counting its content checks, that fails reading from slice `stop_at`.
+class CountingRaw final : public VolumeSource {
+ public:
+  CountingRaw(const std::string& path, int64_t stop_at, int& checks) : stop_at_(stop_at), checks_(checks) {
+    const RawVolumeInfo info = read_raw_sidecar(path + ".json");
+    RawFileSpec spec;
+    spec.dims = info.dims;
+    spec.type = element_type(info.type);
+    spec.xxh3_64 = info.xxh3_64;
+    inner_ = open_raw_source(path, spec);
+  }
+  std::string name() const override { return inner_->name(); }
+  Vec3s dims() const override { return inner_->dims(); }
+  ValueType type() const override { return inner_->type(); }
+  void verify_content() override { ++checks_, inner_->verify_content(); }
+  void read_slab(int64_t z0, int64_t z1, std::span<std::byte> out) override {
+    if (z0 >= stop_at_) throw Error(Errc::io, "killed");
+    inner_->read_slab(z0, z1, out);
+  }
+  std::string describe_json() const override { return inner_->describe_json(); }
+
+ private:
+  std::unique_ptr<VolumeSource> inner_;
+  int64_t stop_at_;
+  int& checks_;
+};
+
+TEST(Resume, ARerunOfAnUnchangedCheckedFileDoesNotHashItAgain) {
+  testing::TempDir dir;
+  const std::string raw = dir.file("g.raw"), store = dir.file("s");
+  write_raw_grid(GridSampler(*make_field("gyroid"), {24, 20, 40}, ValueType::u8), raw);
+  const int64_t never = std::numeric_limits<int64_t>::max();
+  int checks = 0;
+  const BuildOptions o = every_row();
+  // Killed, then resumed: the file was checked before the kill and has not changed.
+  CountingRaw killed(raw, 21, checks);
+  EXPECT_THROW(build_store(killed, store, o), Error);
+  EXPECT_EQ(checks, 1);
+  CountingRaw rest(raw, never, checks);
+  EXPECT_GT(build_store(rest, store, o).resumed_at_slice, 0);
+  EXPECT_EQ(checks, 1) << "the resumed build hashed the file again";
+  // Up to date: not hashed either.
+  EXPECT_TRUE(build_store(*std::make_unique<CountingRaw>(raw, never, checks), store, o).up_to_date);
+  EXPECT_EQ(checks, 1);
+  // Touched (a new modification time, the same bytes): hashed, and still up to date.
+  struct stat st {};
+  ASSERT_EQ(::stat(raw.c_str(), &st), 0);
+  const timespec later[2] = {st.st_atim, {st.st_mtim.tv_sec + 10, st.st_mtim.tv_nsec}};
+  ASSERT_EQ(::utimensat(AT_FDCWD, raw.c_str(), later, 0), 0);
+  EXPECT_TRUE(build_store(*std::make_unique<CountingRaw>(raw, never, checks), store, o).up_to_date);
+  EXPECT_EQ(checks, 2);
+  // Rewritten (new bytes, a new time): the check names the checksum, and the store stays.
+  {
+    std::fstream f(raw, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(100);
+    f.put(char(7));
+  }
+  const timespec latest[2] = {st.st_atim, {st.st_mtim.tv_sec + 20, st.st_mtim.tv_nsec}};
+  ASSERT_EQ(::utimensat(AT_FDCWD, raw.c_str(), latest, 0), 0);
+  try {
+    build_store(*std::make_unique<CountingRaw>(raw, never, checks), store, o);
+    ADD_FAILURE() << "a rewritten file was taken for its sidecar's";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("xxh3_64"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(probe_store(store), StoreState::complete);
 }
 
 TEST(Resume, AKilledBuildResumesFromItsLastCheckpointAndEqualsAnUninterruptedOne) {
