@@ -1,5 +1,5 @@
 # bench/peers/lib.sh: what the peers drivers share (peers.sh for grids, tets.sh for tetrahedral
-# meshes): argument checks, the brickyard executable and its back ends, the Debian packages, and
+# meshes, dvr.sh for volume rendering): argument checks, the brickyard executable and its back ends, the Debian packages, and
 # embree_frame compiled into build-peers/. Sourced, not run: the driver sets `me` (the prefix
 # of its messages), `here` (bench/peers) and `root` (the repository) first.
 
@@ -37,12 +37,12 @@ need_backend() {
   fi
 }
 
-# install_peers: Debian's python3-vtk9, python3-numpy, libembree-dev, g++ and pkg-config, with
-# apt-get where any is missing (as root, or through sudo). Sets `py`, the python3 to run.
-install_peers() {
+# install_debian PACKAGE...: the Debian packages that are missing, with apt-get (as root, or
+# through sudo). Sets `py`, the python3 to run.
+install_debian() {
   py=/usr/bin/python3  # Debian's: python3-vtk9 and python3-numpy are built for it, not for another python3 on PATH
   local need=() p sudo apt_install
-  for p in python3 python3-vtk9 python3-numpy libembree-dev g++ pkg-config; do
+  for p in "$@"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || need+=("$p")
   done
   [ ${#need[@]} -gt 0 ] || return 0
@@ -55,6 +55,12 @@ install_peers() {
   "${apt_install[@]}" "${need[@]}" >/dev/null ||
     { "${sudo[@]}" apt-get update -qq -o DPkg::Lock::Timeout=600 && "${apt_install[@]}" "${need[@]}" >/dev/null; } ||
     fail "apt-get could not install ${need[*]}"
+}
+
+# install_peers: Debian's python3-vtk9, python3-numpy, libembree-dev, g++ and pkg-config, where
+# any is missing. Sets `py`, the python3 to run.
+install_peers() {
+  install_debian python3 python3-vtk9 python3-numpy libembree-dev g++ pkg-config
 }
 
 # build_embree_frame: compiles embree_frame.cpp into build-peers/ when it is missing or older

@@ -29,12 +29,18 @@ import sys
 import time
 
 
+ME = "peers"  # the prefix of messages; dvr.py, which imports this module, sets its own
+
+
 def fail(message, code=1):
-    print(f"peers: {message}", file=sys.stderr)
+    print(f"{ME}: {message}", file=sys.stderr)
     sys.exit(code)
 
 
-def read_sidecar(raw):
+def read_sidecar(raw, types=("f32",)):
+    """A raw file's sidecar (FILE.raw.json, as `brickyard generate` and `export` write it), of a
+    value type among `types`: bench/peers generates f32 for the isosurface peers, so that both
+    sides see the same values; dvr.py reads the store's own type."""
     path = raw + ".json"
     try:
         with open(path) as f:
@@ -44,8 +50,8 @@ def read_sidecar(raw):
     for key in ("dims", "type", "spacing", "origin"):
         if key not in side:
             fail(f"{path}: no '{key}'")
-    if side["type"] != "f32":
-        fail(f"{path}: type {side['type']}; bench/peers generates f32 so that both sides see the same values")
+    if side["type"] not in types:
+        fail(f"{path}: type {side['type']}; expected {' or '.join(types)}")
     if side.get("endianness", "little") != "little":
         fail(f"{path}: big-endian raw files are not supported here")
     return side

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# bench/peers/peers.sh (grids) and bench/peers/tets.sh (tetrahedral meshes) refuse bad
-# arguments with exit status 2 and a message naming the option, before they install, compile
-# or generate anything; --help exits 0. Needs neither VTK nor Embree: every case here stops at
-# argument checking.
+# bench/peers/peers.sh (grids), bench/peers/tets.sh (tetrahedral meshes) and bench/peers/dvr.sh
+# (volume rendering) refuse bad arguments with exit status 2 and a message naming the option,
+# before they install, compile or generate anything; --help exits 0. Needs neither VTK nor
+# Embree: every case here stops at argument checking.
 #   peers_args.sh SOURCE_DIR BRICKYARD_EXE
 set -uo pipefail
 peers="$1/bench/peers/peers.sh" by="$2"
@@ -51,5 +51,21 @@ expect 2 "no back end 'no-such-backend' (it has: .*tet_bvh" --brickyard "$by" --
 expect 2 "'raymarch' does not render tetrahedral meshes" --brickyard "$by" --backend raymarch
 expect 2 "no field 'no-such-field' (it has: .*sphere" --brickyard "$by" --mesh mesh:no-such-field
 expect 1 "no brickyard executable" --brickyard /nonexistent/brickyard
+
+peers="$1/bench/peers/dvr.sh"
+scenes="$1/scenes"
+expect 0 "usage: bench/peers/dvr.sh" --help
+expect 2 "unknown argument '--iso'" --iso 0.5
+expect 2 "--threads: 'abc' is not an integer" --threads abc
+expect 2 "--sample-distances: 'x' is not a number of voxels" --sample-distances 1,x
+expect 2 "--sample-distances: '0' is not a number of voxels" --sample-distances 0
+expect 2 "--type: 'u32' is not u8, i8, u16, i16 or f32" --field fbm --type u32
+expect 2 "--size and --type are for --field" --size 64
+expect 2 "--store and --field: give one" --store x --field fbm
+expect 2 "--scene: /nonexistent.json: no such file" --scene /nonexistent.json
+expect 2 "'mode' is \"iso\"; the volume-rendering peers need a dvr scene" --scene "$scenes/bench-iso.json"
+expect 2 "--store: /nonexistent.store: no such directory" --brickyard "$by" --store /nonexistent.store
+expect 2 "no field 'no-such-field' (it has: .*fbm" --brickyard "$by" --field no-such-field
+expect 1 "no brickyard executable" --brickyard /nonexistent/brickyard --field fbm
 
 [ "$failures" -eq 0 ] && echo "all cases passed" || { echo "$failures case(s) failed"; exit 1; }
