@@ -343,9 +343,11 @@ int run_flight(const FlightCliOptions& o) {
     collect_unreadable(cache);
     cache.close();  // writes the trace, or throws before it is reported written
   } else {
-    if (!o.values.empty() || o.time_step != 0)
-      throw Error(Errc::invalid_argument, "--values and --time-step apply to meshes").with_file(o.store);
-    GridCache grid_cache(store, c);
+    if (!o.values.empty()) throw Error(Errc::invalid_argument, "--values applies to meshes").with_file(o.store);
+    if (o.time_step < 0 || o.time_step >= store.time_steps())
+      throw Error(Errc::invalid_argument, fmt::format("time step {} of a grid with {}", o.time_step, store.time_steps()))
+          .with_field("--time-step");
+    GridCache grid_cache(store, c, o.time_step);
     BrickCache& cache = grid_cache.bricks();
     std::cout << fmt::format("flight over {} ({} levels, {} L1 slots, L2 {}), {} frames at {}x{}\n", o.store,
                              store.layout().levels, cache.pool_slots(), format_bytes(double(c.l2_bytes)),
@@ -396,7 +398,7 @@ void add_cache_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("--loaders", o->loaders, "Loader threads")->capture_default_str();
     cmd->add_option("--trace", o->trace, "Record every access to this trace file");
     cmd->add_option("--values", o->values, "Meshes: only clusters whose values meet LO,HI (an isovalue: V,V)");
-    cmd->add_option("--time-step", o->time_step, "Meshes: the time step whose value ranges --values tests")
+    cmd->add_option("--time-step", o->time_step, "The time step flown over (grids), or whose value ranges --values tests (meshes)")
         ->capture_default_str();
     cmd->add_option("--stats", o->stats, "Write the cache statistics as JSON");
     cmd->add_flag("--allow-damaged", o->allow_damaged,

@@ -101,6 +101,7 @@ struct RenderOptions {
   std::string dataset;
   std::string scene, out, depth, normals, stats, frames, backend, error_maps;
   std::vector<std::string> sets;
+  std::optional<int> time_step;
   bool list = false;
   bool settle = false;
   bool allow_damaged = false;
@@ -163,6 +164,25 @@ int run_render(const RenderOptions& o) {
   if (!o.error_maps.empty()) check_output_directory(o.error_maps, "--error-maps");
   Scene scene = load_scene(o.scene);
   if (!o.dataset.empty()) scene.dataset = o.dataset;
+  // The time step is the scene's, not a back end's parameter; `--set time_step=K` is taken for
+  // --time-step K, as a user reaching for --set first would write it.
+  std::vector<std::string> sets;
+  std::optional<int> time_step = o.time_step;
+  for (const std::string& s : o.sets) {
+    if (s.rfind("time_step=", 0) != 0) {
+      sets.push_back(s);
+      continue;
+    }
+    const double v = parse_number(s.substr(10), "--set time_step");
+    if (!(v >= 0) || v != std::floor(v) || v > double(1 << 20))
+      throw Error(Errc::invalid_argument, fmt::format("'{}' is not a time step", s.substr(10))).with_field("--set time_step");
+    time_step = int(v);
+  }
+  if (time_step) {
+    if (*time_step < 0) throw Error(Errc::invalid_argument, "a time step is 0 or more").with_field("--time-step");
+    scene.time_step = *time_step;
+    scene.time_count = 1;
+  }
   {
     const double pixels = double(scene.width) * double(scene.height);
     const double sessions = o.error_maps.empty() ? 1 : 2;  // --error-maps renders the reference beside
@@ -173,7 +193,7 @@ int run_render(const RenderOptions& o) {
   }
   RenderSession::Options opts;
   opts.backend = o.backend;
-  opts.params = parse_sets(o.sets, "--set");
+  opts.params = parse_sets(sets, "--set");
   RenderSession session(scene, opts);
   const std::vector<int> frames = parse_frames(o.frames, scene.frames());
   for (const std::string* path : {&o.out, &o.depth, &o.normals, &o.stats})
@@ -593,7 +613,9 @@ void add_render_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("--frames", o->frames, "Frames of a camera path: all, or a list of N and A-B such as 0,90,10-20 (default 0)");
     cmd->add_option("--backend", o->backend, "Back end to use instead of the scene's");
     cmd->add_option("--dataset", o->dataset, "Store to render instead of the scene's dataset");
-    cmd->add_option("--set", o->sets, "Back-end parameter NAME=VALUE (repeatable)");
+    cmd->add_option("--set", o->sets, "Back-end parameter NAME=VALUE (repeatable); time_step=K as --time-step");
+    cmd->add_option("--time-step", o->time_step,
+                    "The dataset's time step to render instead of the scene's time_step or time_series (0-based)");
     cmd->add_option("--error-maps", o->error_maps, "Also render the reference; print the error and write heat maps into this directory");
     cmd->add_flag("--list-backends", o->list, "List the back ends, their modes and parameters");
     cmd->add_flag("--settle", o->settle, "Camera paths: let asynchronous back ends converge on every frame (a still camera always does)");

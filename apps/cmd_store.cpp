@@ -7,6 +7,7 @@
 #include <mutex>
 #include <optional>
 #include <set>
+#include <tuple>
 #include <string>
 #include <vector>
 
@@ -44,7 +45,8 @@ namespace fs = std::filesystem;
 // ----------------------------------------------------------------------------------- import
 
 struct ImportOptions {
-  std::string source;
+  std::vector<std::string> sources;  ///< several: the time steps of one grid, in order
+  std::string source;                ///< the one being opened (sources[0] until then)
   std::string out;
   // raw
   std::string dims, type, endian = "little", spacing, origin;
@@ -56,6 +58,7 @@ struct ImportOptions {
   std::string grid;
   // NIfTI and netCDF
   std::optional<int64_t> time_step;
+  std::string time_step_text;  ///< --time-step as given: N, or all
   // netCDF
   std::string variable;
   // DICOM
@@ -218,8 +221,59 @@ void refuse_options_for_other_sources(const ImportOptions& o) {
         .with_field("--move");
 }
 
-void run_import(const ImportOptions& o) {
-  refuse_options_for_other_sources(o);
+/// --time-step: N (0-based), or all.
+void parse_time_step(ImportOptions& o) {
+  if (o.time_step_text.empty() || o.time_step_text == "all") return;
+  const double v = parse_number(o.time_step_text, "--time-step");
+  if (!(v >= 0) || v != std::floor(v) || v > 1e15)
+    throw Error(Errc::invalid_argument, fmt::format("'{}' is not a time step (0, 1, ... or all)", o.time_step_text))
+        .with_field("--time-step");
+  o.time_step = int64_t(v);
+}
+
+/// The grid's time steps: one source, several files in order, or every volume of a 4D NIfTI
+/// file or netCDF variable (--time-step all).
+std::vector<std::unique_ptr<VolumeSource>> open_sources(const ImportOptions& o) {
+  std::vector<std::unique_ptr<VolumeSource>> sources;
+  if (o.sources.size() > 1) {
+    if (o.time_step_text == "all")
+      throw Error(Errc::invalid_argument, "takes the time steps of one 4D file; several files are the time steps already")
+          .with_field("--time-step");
+    for (const std::string& path : o.sources) {
+      ImportOptions step = o;
+      step.source = path;
+      if (is_mesh_source(path) || path.rfind("field:", 0) == 0)
+        throw Error(Errc::invalid_argument, "several sources are the time steps of one grid: volume files only, not "
+                                            "fields or meshes")
+            .with_file(path);
+      sources.push_back(open_source(step));
+    }
+    return sources;
+  }
+  if (o.time_step_text != "all") {
+    sources.push_back(open_source(o));
+    return sources;
+  }
+  ImportOptions step = o;
+  step.time_step = 0;
+  sources.push_back(open_source(step));
+  const auto described = nlohmann::json::parse(sources.front()->describe_json());
+  const int64_t steps = described.value("time_steps", int64_t(1));
+  for (step.time_step = 1; *step.time_step < steps; ++*step.time_step) sources.push_back(open_source(step));
+  return sources;
+}
+
+void run_import(ImportOptions o) {
+  parse_time_step(o);
+  if (o.sources.size() > 1 && is_mesh_source(o.sources.front()))
+    throw Error(Errc::invalid_argument, "a mesh's time steps come from its own file (a .pvd, or arrays NAME_0, NAME_1 ...); "
+                                        "import one mesh at a time")
+        .with_file(o.sources[1]);
+  for (const std::string& path : o.sources) {
+    o.source = path;
+    refuse_options_for_other_sources(o);
+  }
+  o.source = o.sources.front();
   if (is_mesh_source(o.source)) {
     MeshImportOptions m = o.mesh;
     m.source = o.source;
@@ -229,7 +283,8 @@ void run_import(const ImportOptions& o) {
     m.force = o.force;
     return run_mesh_import(m);
   }
-  auto source = open_source(o);
+  const std::vector<std::unique_ptr<VolumeSource>> sources = open_sources(o);
+  VolumeSource* const source = sources.front().get();
   // A DICOM directory may hold several series: say which one is imported, and the others.
   if (is_dicom_path(o.source)) std::cout << nlohmann::json::parse(source->describe_json()).value("summary", "") << "\n";
   BuildOptions b;
@@ -267,9 +322,18 @@ void run_import(const ImportOptions& o) {
   if (o.octree) b.octree = OctreeBuildOptions{};
 
   const Vec3s d = source->dims();
-  std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
-  Progress progress(fmt::format("import {}", fs::path(source->name()).filename().string()), source->input_bytes(), "B");
-  const BuildResult r = build_store(*source, o.out, b, &progress);
+  std::vector<VolumeSource*> steps;
+  uint64_t input_bytes = 0;
+  for (const auto& s : sources) steps.push_back(s.get()), input_bytes += s->input_bytes();
+  if (steps.size() == 1)
+    std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
+  else
+    std::cout << fmt::format("import {} time steps, {} to {} ({}x{}x{} {} each) -> {}\n", steps.size(), source->name(),
+                             steps.back()->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
+  Progress progress(fmt::format("import {}{}", fs::path(source->name()).filename().string(),
+                                steps.size() > 1 ? fmt::format(" +{} steps", steps.size() - 1) : ""),
+                    input_bytes, "B");
+  const BuildResult r = build_series(steps, o.out, b, &progress);
   if (!r.up_to_date) progress.finish();  // otherwise it ends without a closing line: no work done
   if (r.up_to_date) {
     const bool octree_missing = o.octree && !r.manifest.octree;
@@ -282,6 +346,9 @@ void run_import(const ImportOptions& o) {
   if (r.resumed_at_slice > 0)
     std::cout << fmt::format("resumed an interrupted build of the same import at slice {} of {} ({:.0f}% done before)\n",
                              r.resumed_at_slice, d.z, 100.0 * double(r.resumed_at_slice) / double(d.z));
+  if (r.resumed_at_step > 0)
+    std::cout << fmt::format("resumed an interrupted build of the same import at time step {} of {} (the steps before it "
+                             "were done)\n", r.resumed_at_step, steps.size());
   std::cout << fmt::format("wrote {}: {} levels, {} of bricks from {} of input ({:.2f}x) in {} ({}/s)\n", o.out,
                            r.manifest.levels, format_bytes(double(r.stored_bytes)), format_bytes(double(r.input_bytes)),
                            double(r.input_bytes) / std::max<double>(1, double(r.stored_bytes)), format_duration(r.seconds),
@@ -342,11 +409,15 @@ void print_info(const std::string& path, const Store& store, bool json) {
   std::cout << fmt::format("volume {}x{}x{} {}, spacing ({:g}, {:g}, {:g}), origin ({:g}, {:g}, {:g})\n", m.dims.x, m.dims.y,
                            m.dims.z, to_string(f.type), m.spacing.x, m.spacing.y, m.spacing.z, m.origin.x, m.origin.y,
                            m.origin.z);
-  std::cout << fmt::format("bricks {}^3 + apron {}, {}{}, {} levels, node table {}\n", f.brick_size, f.apron,
+  std::cout << fmt::format("bricks {}^3 + apron {}, {}{}, {} levels, node table {}{}\n", f.brick_size, f.apron,
                            to_string(f.codec), f.shuffles() ? " after byte-shuffle" : "", m.levels,
-                           format_bytes(double(store.nodes().bytes())));
+                           format_bytes(double(store.nodes().bytes())), m.time_steps > 1 ? " a time step" : "");
+  if (m.time_steps > 1) std::cout << fmt::format("time steps {} (0 to {})\n", m.time_steps, m.time_steps - 1);
   if (!m.complete) return;
-  std::cout << fmt::format("values [{:g}, {:g}], background {:g}\n\n", m.min_value, m.max_value, m.background);
+  std::cout << fmt::format("values [{:g}, {:g}], background {:g}\n", m.min_value, m.max_value, m.background);
+  for (size_t i = 0; i < m.step_ranges.size(); ++i)
+    std::cout << fmt::format("  time step {}: values [{:g}, {:g}]\n", i, m.step_ranges[i].min, m.step_ranges[i].max);
+  std::cout << (m.time_steps > 1 ? "levels: every time step's bricks together\n\n" : "\n");
   std::cout << fmt::format("{:>5} {:>16} {:>12} {:>9} {:>9} {:>10} {:>10} {:>10} {:>7}\n", "level", "voxels", "bricks",
                            "constant", "empty", "stored", "raw", "on disk", "ratio");
   LevelStats total;
@@ -364,7 +435,7 @@ void print_info(const std::string& path, const Store& store, bool json) {
     total.raw_bytes += s.raw_bytes;
     total.stored_bytes += s.stored_bytes;
   }
-  const double input = double(volume(m.dims)) * double(size_of(f.type));
+  const double input = double(volume(m.dims)) * double(size_of(f.type)) * double(m.time_steps);
   std::cout << fmt::format("{:>5} {:>16} {:>12} {:>8.1f}% {:>8.1f}% {:>10} {:>10} {:>10} {:>6.2f}x\n", "all", "",
                            total.bricks, 100.0 * double(total.constant) / double(total.bricks),
                            100.0 * double(total.empty) / double(total.bricks), total.bricks - total.constant,
@@ -426,27 +497,30 @@ int run_verify(const std::string& path) {
   if (store.kind() == DataKind::tetrahedral) return verify_mesh(path, store);
   const GridLayout& l = store.layout();
   const BrickFormat& f = store.format();
+  const int steps = store.time_steps();
   std::mutex bad_mutex;
-  std::vector<std::pair<BrickKey, std::string>> bad;
+  std::vector<std::tuple<int, BrickKey, std::string>> bad;
+  int step = 0;  // the time step checked (a grid of several is checked step by step)
   auto report = [&](const BrickKey& k, std::string why) {
     std::lock_guard lock(bad_mutex);
-    bad.emplace_back(k, std::move(why));
+    bad.emplace_back(step, k, std::move(why));
   };
 
   // Step 1: every stored record belongs to a non-constant node inside the layout.
-  std::vector<BrickKey> stored;
   {
     auto txn = store.begin_read();
-    store.for_each_record(txn, [&](const BrickKey& k, std::span<const std::byte>) {
-      if (!l.contains(k)) report(k, "record outside the store's layout");
-      else if (store.nodes().at(k).is_constant()) report(k, "record for a constant node");
-      stored.push_back(k);
+    store.for_each_step_record(txn, [&](int s, const BrickKey& k, std::span<const std::byte>) {
+      step = s;
+      if (s >= steps) report(k, fmt::format("record of time step {}; the store has {}", s, steps));
+      else if (!l.contains(k)) report(k, "record outside the store's layout");
+      else if (store.nodes(s).at(k).is_constant()) report(k, "record for a constant node");
       return true;
     });
   }
   // Step 2: every node: flags, and for stored bricks a full decode with checksum and ranges.
-  Progress progress("verify", uint64_t(l.total_bricks()), "bricks");
+  Progress progress("verify", uint64_t(l.total_bricks()) * uint64_t(steps), "bricks");
   std::atomic<int64_t> decoded{0};
+  for (step = 0; step < steps; ++step)
   for (int level = 0; level < l.levels; ++level) {
     const int64_t n = l.brick_count(level);
     parallel_for<int64_t>(0, n, 16, [&](int64_t i0, int64_t i1) {
@@ -454,18 +528,18 @@ int run_verify(const std::string& path) {
       std::vector<std::byte> buffer(f.bytes());
       for (int64_t i = i0; i < i1; ++i) {
         const BrickKey k = l.key_at(level, i);
-        const NodeRecord& node = store.nodes().at(k);
+        const NodeRecord& node = store.nodes(step).at(k);
         const bool finest = level == l.finest();
         if (bool(node.flags & kNodeFinest) != finest || bool(node.flags & kNodeHasChildren) == finest)
           report(k, fmt::format("node flags 0x{:x} do not match level {}", node.flags, level));
         if (!(node.min <= node.max)) report(k, fmt::format("node range [{}, {}] is inverted", node.min, node.max));
         if (node.is_constant()) {
-          if (store.record(txn, k)) report(k, "constant node has a record");
+          if (store.record(txn, k, step)) report(k, "constant node has a record");
           if (node.constant < node.min || node.constant > node.max)
             report(k, fmt::format("constant {} outside the node range [{}, {}]", node.constant, node.min, node.max));
           continue;
         }
-        auto rec = store.record(txn, k);
+        auto rec = store.record(txn, k, step);
         if (!rec) {
           report(k, "record missing");
           continue;
@@ -491,9 +565,13 @@ int run_verify(const std::string& path) {
     });
   }
   progress.finish();
-  std::sort(bad.begin(), bad.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (const auto& [k, why] : bad) std::cout << fmt::format("BAD {}: {}\n", k.to_string(), why);
-  std::cout << fmt::format("{}: {} nodes, {} bricks decoded, {} problems\n", path, l.total_bricks(), decoded.load(), bad.size());
+  std::sort(bad.begin(), bad.end(), [](const auto& a, const auto& b) {
+    return std::tie(std::get<0>(a), std::get<1>(a)) < std::tie(std::get<0>(b), std::get<1>(b));
+  });
+  for (const auto& [s, k, why] : bad)
+    std::cout << fmt::format("BAD {}{}: {}\n", steps > 1 ? fmt::format("time step {} ", s) : "", k.to_string(), why);
+  std::cout << fmt::format("{}: {} nodes{}, {} bricks decoded, {} problems\n", path, l.total_bricks() * steps,
+                           steps > 1 ? fmt::format(" ({} time steps)", steps) : "", decoded.load(), bad.size());
   const size_t octree_problems = verify_octree(path, store);
   return bad.empty() && octree_problems == 0 ? 0 : 1;
 }
@@ -501,8 +579,16 @@ int run_verify(const std::string& path) {
 // ----------------------------------------------------------------------------------- export
 
 void run_export(const std::string& path, std::optional<int> level_given, const std::string& box_text, const std::string& out,
-                const std::string& grid, const std::string& encoding) {
+                const std::string& grid, const std::string& encoding, std::optional<int> time_step) {
   Store store(path);
+  const int step = time_step.value_or(0);
+  if (time_step && store.kind() == DataKind::tetrahedral)
+    throw Error(Errc::invalid_argument, "a mesh exports whole, every time step in its .vtu").with_field("--time-step");
+  if (step < 0 || step >= store.time_steps())
+    throw Error(Errc::invalid_argument, fmt::format("time step {} of a store with {} (0 to {})", step, store.time_steps(),
+                                                    store.time_steps() - 1))
+        .with_file(path)
+        .with_field("--time-step");
   if (store.kind() == DataKind::tetrahedral) {
     if (level_given || !box_text.empty() || !grid.empty())
       throw Error(Errc::invalid_argument, "--level, --box and --grid apply to grids; a mesh exports whole").with_file(path);
@@ -529,12 +615,12 @@ void run_export(const std::string& path, std::optional<int> level_given, const s
   check_writable(out);  // the VDB writer opens its file only after the whole export
   Progress progress(fmt::format("export level {}", level), uint64_t(volume(region.size())), "voxels");
   if (to_vdb) {
-    export_vdb(store, level, region, out, grid, &progress);
+    export_vdb(store, level, region, out, grid, &progress, step);
     progress.finish();
     std::cout << fmt::format("wrote {}\n", out);
     return;
   }
-  const RawVolumeInfo info = export_raw(store, level, region, out, &progress);
+  const RawVolumeInfo info = export_raw(store, level, region, out, &progress, step);
   progress.finish();
   std::cout << fmt::format("wrote {} ({}x{}x{} {}, {}) and {}\n", out, info.dims.x, info.dims.y, info.dims.z,
                            to_string(info.type), format_bytes(double(info.bytes)), raw_sidecar_path(out));
@@ -546,12 +632,13 @@ void add_store_commands(CLI::App& app, int& exit_status) {
   {
     auto o = std::make_shared<ImportOptions>();
     auto* cmd = app.add_subcommand("import", "Build a multiresolution brick store from a volume");
-    cmd->add_option("SOURCE", o->source,
+    cmd->add_option("SOURCE", o->sources,
                     "A raw file (described by FILE.json or --dims/--type), a .nrrd/.nhdr file, a MetaImage "
                     ".mhd/.mha file, a NIfTI .nii/.nii.gz/.hdr file, a netCDF .nc/.nc4/.cdf file, a DICOM series "
                     "(a directory of slices, or a .dcm file), a .vdb file, "
                     "field:NAME for a procedural field; a mesh (.vtu .pvd .vtk .msh .node/.ele), or mesh:FIELD "
-                    "for a procedural tetrahedral mesh")
+                    "for a procedural tetrahedral mesh. Several volume files: the time steps of one grid, in order "
+                    "(every one the same dims, type, spacing and origin)")
         ->required();
     cmd->add_option("-o,--out", o->out, "Store directory")->required();
     auto* raw = "Raw input";
@@ -572,9 +659,9 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("-s,--size", o->size, "Field: grid size N or NX,NY,NZ")->capture_default_str()->group(field);
     cmd->add_option("--set", o->params, "Field: parameter NAME=VALUE (repeatable)")->group(field);
     cmd->add_option("--grid", o->grid, "OpenVDB: grid name (default: the only grid)")->group("OpenVDB input");
-    cmd->add_option("--time-step", o->time_step,
-                    "NIfTI or netCDF: which volume of a 4D file or (time, z, y, x) variable to import (0-based; "
-                    "needed where there are several, a store holds one volume)")
+    cmd->add_option("--time-step", o->time_step_text,
+                    "NIfTI or netCDF: which volume of a 4D file or (time, z, y, x) variable to import (0-based), or "
+                    "all: every one, as the time steps of one grid (needed where there are several)")
         ->group("NIfTI input");
     cmd->add_option("--variable", o->variable,
                     "netCDF: the variable to import (default: the only 3D or 4D numeric variable)")
@@ -673,7 +760,7 @@ void add_store_commands(CLI::App& app, int& exit_status) {
   {
     struct ExportOptions {
       std::string store, box, out, grid, encoding;
-      std::optional<int> level;
+      std::optional<int> level, time_step;
     };
     auto o = std::make_shared<ExportOptions>();
     auto* cmd = app.add_subcommand("export", "Write one level (or a box of it) as a raw file or an OpenVDB grid; a mesh as .vtu");
@@ -683,7 +770,8 @@ void add_store_commands(CLI::App& app, int& exit_status) {
     cmd->add_option("-o,--out", o->out, "FILE.raw (with FILE.raw.json), FILE.vdb, or FILE.vtu for a mesh")->required();
     cmd->add_option("--grid", o->grid, "OpenVDB grid name (default: the source grid's name, or density)");
     cmd->add_option("--encoding", o->encoding, "Mesh to .vtu: ascii, binary, appended (raw, default), base64 or zlib");
-    cmd->callback([o] { run_export(o->store, o->level, o->box, o->out, o->grid, o->encoding); });
+    cmd->add_option("--time-step", o->time_step, "A grid of several time steps: which one (default 0)");
+    cmd->callback([o] { run_export(o->store, o->level, o->box, o->out, o->grid, o->encoding, o->time_step); });
   }
 }
 

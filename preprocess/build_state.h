@@ -20,7 +20,9 @@
 
 namespace brickyard {
 
-inline constexpr uint32_t kBuildStateVersion = 1;
+/// 2: the series part (time steps done, their ranges, statistics and histograms) after the
+/// identity. A checkpoint of another version is not resumed: the build starts over.
+inline constexpr uint32_t kBuildStateVersion = 2;
 
 class StateWriter {
  public:

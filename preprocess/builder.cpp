@@ -26,7 +26,9 @@
 #include "core/progress.h"
 #include "core/timing.h"
 #include "preprocess/background.h"
+#include "preprocess/build_context.h"
 #include "preprocess/build_state.h"
+#include "preprocess/record_writer.h"
 #include "preprocess/box_filter.h"
 #include "preprocess/volume_source.h"
 #include "storage/store.h"
@@ -69,136 +71,13 @@ NonFinite parse_nonfinite(std::string_view s) {
 
 namespace {
 
-// ---------------------------------------------------------------------------------------------
-// Writer thread: takes encoded records off the compute threads and commits them in batches.
-// Guarded by mutex_: queue_, queued_bytes_, closing_, error_. The StoreWriter is used by the
-// writer thread only (until close() has joined it).
-class RecordWriter {
- public:
-  RecordWriter(StoreWriter& store, size_t max_queued_bytes) : store_(store), max_bytes_(max_queued_bytes) {
-    thread_ = std::thread([this] { run(); });
-  }
-  ~RecordWriter() {
-    {
-      std::lock_guard lock(mutex_);
-      closing_ = true;
-      abandon_ = true;
-    }
-    cv_.notify_all();
-    if (thread_.joinable()) thread_.join();
-  }
-
-  void push(const BrickKey& key, std::vector<std::byte>&& record) { enqueue({key, std::move(record), false}); }
-
-  /// The build's state after every record pushed so far: committed with them, in order.
-  void push_checkpoint(std::vector<std::byte>&& state) { enqueue({{}, std::move(state), true}); }
-
-  /// Seconds the writer spent on the last checkpoint (compressing and committing it).
-  double last_checkpoint_seconds() const { return last_checkpoint_seconds_.load(std::memory_order_relaxed); }
-
-  /// Waits until every record is handed to the store; rethrows the writer's error.
-  void close() {
-    {
-      std::lock_guard lock(mutex_);
-      closing_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-    if (error_) std::rethrow_exception(error_);
-  }
-
- private:
-  struct Item {
-    BrickKey key;
-    std::vector<std::byte> record;
-    bool checkpoint = false;
-  };
-
-  void enqueue(Item&& item) {
-    std::unique_lock lock(mutex_);
-    space_.wait(lock, [&] { return queued_bytes_ < max_bytes_ || error_; });
-    if (error_) std::rethrow_exception(error_);
-    queued_bytes_ += item.record.size();
-    queue_.push_back(std::move(item));
-    cv_.notify_one();
-  }
-
-  void run() {
-    try {
-      while (true) {
-        Item item;
-        {
-          std::unique_lock lock(mutex_);
-          cv_.wait(lock, [&] { return !queue_.empty() || closing_; });
-          if (abandon_ || (queue_.empty() && closing_)) return;
-          item = std::move(queue_.front());
-          queue_.pop_front();
-          queued_bytes_ -= item.record.size();
-        }
-        space_.notify_one();
-        if (item.checkpoint) {
-          const Stopwatch watch;
-          store_.put_checkpoint(item.record);
-          last_checkpoint_seconds_.store(watch.seconds(), std::memory_order_relaxed);
-        } else {
-          store_.put_brick(item.key, std::move(item.record));
-        }
-      }
-    } catch (...) {
-      std::lock_guard lock(mutex_);
-      error_ = std::current_exception();
-      space_.notify_all();
-    }
-  }
-
-  StoreWriter& store_;
-  size_t max_bytes_;
-  std::mutex mutex_;
-  std::condition_variable cv_, space_;
-  std::deque<Item> queue_;
-  size_t queued_bytes_ = 0;
-  bool closing_ = false, abandon_ = false;
-  std::exception_ptr error_;
-  std::atomic<double> last_checkpoint_seconds_{0};
-  std::thread thread_;
-};
-
-// ---------------------------------------------------------------------------------------------
-// Per-build state shared by the levels.
-struct BuildContext {
-  BrickFormat format;
-  GridLayout layout;
-  NodeTable nodes;
-  Downsample downsample = Downsample::average;
-  double tolerance = 0;
-  double background = 0;
-  /// With a background given: the tolerance flattens only bricks within it of the background.
-  bool flatten_background_only = false;
-  RecordWriter* writer = nullptr;
-  // Finest-level histogram: exact per integer value for the integer types (bin 0 is
-  // integer_min), 256 bins over `hist_range` for f32.
-  ValueRange hist_range;
-  size_t hist_bins = 256;
-  tbb::enumerable_thread_specific<std::vector<uint64_t>> histograms;
-  std::vector<uint64_t> resumed_histogram;  ///< counted before the checkpoint a build resumed from
-
-  /// Every count so far, the threads' and a resumed build's.
-  std::vector<uint64_t> histogram() const {
-    std::vector<uint64_t> sum = resumed_histogram;
-    sum.resize(hist_bins, 0);
-    for (const auto& h : histograms)
-      for (size_t i = 0; i < h.size(); ++i) sum[i] += h[i];
-    return sum;
-  }
-  struct AtomicStats {
-    std::atomic<int64_t> constant{0}, empty{0};
-    std::atomic<uint64_t> raw_bytes{0}, stored_bytes{0};
-  };
-  std::vector<AtomicStats> stats;
-
-  explicit BuildContext(size_t levels) : stats(levels) {}
-};
-
+using build_detail::BuildContext;
+using build_detail::RecordWriter;
+using build_detail::SeriesState;
+using build_detail::add_step;
+using build_detail::check_series;
+using build_detail::series_source_json;
+using build_detail::summarise;
 
 // One level of the pyramid: a ring of slices, row-by-row brick output, and the 2x filter that
 // feeds the next coarser level.
@@ -514,8 +393,11 @@ std::string build_params_json(const BuildOptions& o, double source_background) {
 // ---------------------------------------------------------------------------------------------
 // Checkpoints: everything but the levels' slices (those are Level::save's), after the identity.
 
-void save_common(StateWriter& w, const BuildIdentity& id, const BuildContext& ctx, const ScanResult& scan, int64_t z) {
+void save_common(StateWriter& w, const BuildIdentity& id, const SeriesState& series, const BuildContext& ctx,
+                 const ScanResult& scan, int64_t z) {
   put_identity(w, id);
+  series.save(w);
+  w.put(uint8_t(1));  // a step under way: its state follows
   w.put(z), w.put(ctx.background);
   w.put(scan.nonfinite), w.put(scan.first), w.put(scan.min), w.put(scan.max);
   w.put(ctx.hist_range), w.put(uint64_t(ctx.hist_bins));
@@ -524,10 +406,17 @@ void save_common(StateWriter& w, const BuildIdentity& id, const BuildContext& ct
   for (int l = 0; l < ctx.layout.levels; ++l) w.put_vector(ctx.nodes.level(l));
 }
 
-/// Restores what save_common wrote into a context set up for the same volume and parameters;
-/// returns the finest slices done.
-int64_t restore_common(StateReader& r, BuildContext& ctx, ScanResult& scan) {
+/// The identity and series part of a checkpoint; returns whether a step's state follows
+/// (restore_common), or whether it was taken between two steps.
+bool restore_series(StateReader& r, SeriesState& series) {
   if (!get_identity(r)) throw Error(Errc::corrupt, "the build checkpoint is of another format version");
+  series.restore(r);
+  return r.get<uint8_t>() != 0;
+}
+
+/// Restores a step's state, as save_common wrote it after the series part, into a context set
+/// up for the same volume and parameters; returns the finest slices done.
+int64_t restore_common(StateReader& r, BuildContext& ctx, ScanResult& scan) {
   const int64_t z = r.get<int64_t>();
   ctx.background = r.get<double>();
   scan.nonfinite = r.get<uint64_t>(), scan.first = r.get<Vec3s>(), scan.min = r.get<double>(), scan.max = r.get<double>();
@@ -585,7 +474,8 @@ uint64_t input_bytes_before(const VolumeSource& source, int64_t z) {
 
 template <typename T>
 void run_levels(VolumeSource& source, BuildContext& ctx, const BuildOptions& options, const ScanResult& scan,
-                Progress* progress, const BuildIdentity& identity, StateReader* resume, int64_t z_start) {
+                Progress* progress, const BuildIdentity& identity, const SeriesState& series, StateReader* resume,
+                int64_t z_start) {
   // Coarsest first in memory so each level can point at its coarser neighbour.
   std::vector<std::unique_ptr<Level<T>>> levels(size_t(ctx.layout.levels));
   for (int l = 0; l < ctx.layout.levels; ++l)
@@ -620,7 +510,7 @@ void run_levels(VolumeSource& source, BuildContext& ctx, const BuildOptions& opt
     if (!due) continue;
     const Stopwatch watch;
     StateWriter w;
-    save_common(w, identity, ctx, scan, z + 1);
+    save_common(w, identity, series, ctx, scan, z + 1);
     for (const auto& level : levels) level->save(w);
     ctx.writer->push_checkpoint(std::move(w.bytes()));
     last_cost = watch.seconds();
@@ -687,142 +577,172 @@ ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const Buil
   return needs;
 }
 
-BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& given, Progress* progress) {
+BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options, Progress* progress) {
+  VolumeSource* const one[] = {&source};
+  return build_series(one, dir, options, progress);
+}
+
+BuildResult build_series(std::span<VolumeSource* const> sources, const std::string& dir, const BuildOptions& given,
+                         Progress* progress) {
+  BY_CHECK(!sources.empty());
   validate(given);
+  VolumeSource& first = *sources[0];
+  const int steps = int(sources.size());
   BuildOptions options = given;
-  options.level_set = given.level_set || source.is_level_set();
+  options.level_set = given.level_set || first.is_level_set();
   // A level set's thin parts (a one-voxel shell) average away at coarser levels, where
   // level-of-detail renderers would lose them; the minimum of the signed distance keeps every
   // block that holds some inside, dilating the surface by at most a voxel of that level.
   if (!options.downsample) options.downsample = options.level_set ? Downsample::min : Downsample::average;
-  if (const std::string problem = spacing_problem(source.spacing()); !problem.empty())
-    throw Error(Errc::format, problem).with_file(source.name()).with_field("spacing");
+  if (const std::string problem = spacing_problem(first.spacing()); !problem.empty())
+    throw Error(Errc::format, problem).with_file(first.name()).with_field("spacing");
+  check_series(sources);
+  if (steps > 1 && options.octree)
+    throw Error(Errc::invalid_argument, fmt::format("an octree volume is built over a grid of one time step; these are {}", steps))
+        .with_field("--octree");
   Stopwatch watch;
   BuildResult result;
-  const GridLayout layout = GridLayout::make(source.dims(), options.brick_size);
-  const std::string source_json = source.describe_json();
-  const std::string build_json = build_params_json(options, source.background());
+  const GridLayout layout = GridLayout::make(first.dims(), options.brick_size);
+  const std::string source_json = series_source_json(sources);
+  const std::string build_json = build_params_json(options, first.background());
 
   StoreBuildTarget target(dir, source_json, build_json, options.force, result, options.octree.has_value());
   // A rerun (up to date, or resuming a killed build) of a file checked then and unchanged
   // since need not read all of it again first: 2 s of an 8 GiB file's 5 s resumption.
-  if (!target.source_checked_before(source_json)) source.verify_content();
+  if (!target.source_checked_before(source_json))
+    for (VolumeSource* s : sources) s->verify_content();
   if (target.up_to_date()) {
     result.up_to_date = true;
     return result;
   }
-  ResourceNeeds needs = estimate_build_needs(source.dims(), source.type(), options, tbb::this_task_arena::max_concurrency());
+  ResourceNeeds needs = estimate_build_needs(first.dims(), first.type(), options, tbb::this_task_arena::max_concurrency());
+  needs.disk.bytes *= uint64_t(steps);
   if (!options.check_disk) needs.disk.bytes = 0;
   needs.disk_path = dir;  // a rebuild beside it is on the same file system
   check_resources(needs);
 
   BrickFormat format;
-  format.type = source.type();
+  format.type = first.type();
   format.brick_size = options.brick_size;
   format.apron = options.apron;
   format.codec = options.codec;
   format.hc_level = options.hc_level;
   format.shuffle = options.shuffle;
 
-  BuildContext ctx(size_t(layout.levels));
-  ctx.format = format;
-  ctx.layout = layout;
-  ctx.nodes = NodeTable(layout);
-  ctx.downsample = *options.downsample;
-  ctx.tolerance = options.constant_tolerance;
-  ctx.flatten_background_only = options.background.has_value() || options.background_auto;
   const BuildIdentity identity{source_json, build_json};
-  ScanResult scan;
+  SeriesState series;
   std::optional<StateReader> resume;
-  int64_t z_start = 0;
+  bool resume_in_step = false;
   if (const auto& state = target.resume_state()) {
-    // An interrupted build of this same import: what its pre-passes found, its statistics and
-    // node table so far, and where it stopped come from its last checkpoint.
+    // An interrupted build of this same import: the steps it finished, and where it stopped.
     resume.emplace(*state);
     try {
-      z_start = restore_common(*resume, ctx, scan);
+      resume_in_step = restore_series(*resume, series);
+      result.resumed_at_step = series.step;
+      if (series.step > steps || (series.step == steps && resume_in_step))
+        throw Error(Errc::corrupt, "the build checkpoint's time steps do not add up");
     } catch (Error& e) {
       throw e.with_file(target.path());
     }
-    result.resumed_at_slice = z_start;
-  } else {
-    prepare_fresh_build(source, options, ctx, scan, progress);
   }
 
   Manifest manifest;
+  manifest.time_steps = steps;
   manifest.dims = layout.dims;
-  manifest.spacing = source.spacing();
-  manifest.origin = source.origin();
+  manifest.spacing = first.spacing();
+  manifest.origin = first.origin();
   manifest.format = format;
   manifest.levels = layout.levels;
-  manifest.background = ctx.background;
   manifest.source = nlohmann::json::parse(source_json).dump();
   manifest.build = build_json;
 
   lmdb::EnvOptions env;
-  const uint64_t raw_bytes = uint64_t(volume(layout.dims)) * size_of(format.type);
+  const uint64_t raw_bytes = uint64_t(volume(layout.dims)) * size_of(format.type) * uint64_t(steps);
   env.map_size = options.map_size ? options.map_size : std::max<uint64_t>(uint64_t(64) << 20, raw_bytes + raw_bytes / 2);
   env.growth = options.map_growth;
   env.max_map_size = options.map_growth ? uint64_t(1) << 44 : env.map_size;
   env.no_sync = true;  // the final transaction syncs everything before it
-  auto store = resume ? StoreWriter::reopen(target.path(), env, options.batch_bytes)
-                      : std::make_unique<StoreWriter>(target.path(), manifest, env, options.batch_bytes);
-  if (progress && z_start > 0) progress->start_at(input_bytes_before(source, z_start));
-  {
-    RecordWriter writer(*store, size_t(64) << 20);
-    ctx.writer = &writer;
-    try {
-      dispatch_value_type(format.type, [&](auto tag) {
-        run_levels<decltype(tag)>(source, ctx, options, scan, progress, identity, resume ? &*resume : nullptr, z_start);
-      });
-    } catch (...) {
-      // A source that fails (a read error, a damaged stream) after hours of work: the
-      // checkpoints already queued are committed, so that the rerun resumes from the last.
-      try {
-        writer.close();
-      } catch (...) {
-      }
-      throw;
-    }
-    writer.close();
-  }
-  resume.reset();
-  target.resume_state().reset();  // its slices are no longer needed
+  std::unique_ptr<StoreWriter> store;  // opened once the first step is prepared: a refused volume writes nothing
 
-  // Manifest: value range from the finest node ranges (they cover every voxel), histogram,
-  // per-level statistics.
-  const auto& finest = ctx.nodes.level(layout.finest());
-  manifest.min_value = std::numeric_limits<double>::infinity();
-  manifest.max_value = -std::numeric_limits<double>::infinity();
-  for (const NodeRecord& n : finest) {
-    manifest.min_value = std::min(manifest.min_value, double(n.min));
-    manifest.max_value = std::max(manifest.max_value, double(n.max));
+  std::optional<BuildContext> last;  // the last step's context: its node table for a one-step store
+  for (int step = series.step; step < steps; ++step) {
+    VolumeSource& source = *sources[size_t(step)];
+    BuildContext& ctx = last.emplace(size_t(layout.levels));
+    ctx.format = format;
+    ctx.layout = layout;
+    ctx.nodes = NodeTable(layout);
+    ctx.downsample = *options.downsample;
+    ctx.tolerance = options.constant_tolerance;
+    ctx.flatten_background_only = options.background.has_value() || options.background_auto;
+    ScanResult scan;
+    int64_t z_start = 0;
+    const bool resuming = resume && step == series.step && resume_in_step;
+    if (resuming) {
+      try {
+        z_start = restore_common(*resume, ctx, scan);
+      } catch (Error& e) {
+        throw e.with_file(target.path());
+      }
+      result.resumed_at_slice = z_start;
+    } else {
+      BuildOptions step_options = options;
+      if (step > 0) step_options.background = series.background, step_options.background_auto = false;
+      prepare_fresh_build(source, step_options, ctx, scan, progress);
+    }
+    if (step == 0) series.background = ctx.background;
+    if (!store)
+      store = resume ? StoreWriter::reopen(target.path(), env, options.batch_bytes)
+                     : std::make_unique<StoreWriter>(target.path(), manifest, env, options.batch_bytes);
+    if (progress && step == series.step && (z_start > 0 || step > 0)) {
+      uint64_t done = input_bytes_before(source, z_start);
+      for (int s = 0; s < step; ++s) done += sources[size_t(s)]->input_bytes();
+      progress->start_at(done);
+    }
+    {
+      RecordWriter writer(*store, size_t(64) << 20, step);
+      ctx.writer = &writer;
+      try {
+        dispatch_value_type(format.type, [&](auto tag) {
+          run_levels<decltype(tag)>(source, ctx, options, scan, progress, identity, series, resuming ? &*resume : nullptr,
+                                    z_start);
+        });
+      } catch (...) {
+        // A source that fails (a read error, a damaged stream) after hours of work: the
+        // checkpoints already queued are committed, so that the rerun resumes from the last.
+        try {
+          writer.close();
+        } catch (...) {
+        }
+        throw;
+      }
+      writer.close();
+      ctx.writer = nullptr;
+    }
+    if (resuming) {
+      resume.reset();
+      target.resume_state().reset();  // its slices are no longer needed
+    }
+    add_step(series, ctx);
+    if (steps > 1) {
+      // The step's node table, and a checkpoint between steps, in one transaction.
+      store->put_step_nodes(step, ctx.nodes);
+      StateWriter w;
+      put_identity(w, identity);
+      series.save(w);
+      w.put(uint8_t(0));
+      store->put_checkpoint(w.bytes());
+    }
   }
-  const std::vector<uint64_t> fine = ctx.histogram();
-  manifest.histogram.counts.assign(256, 0);
-  if (format.type == ValueType::f32) {
-    manifest.histogram.lo = ctx.hist_range.lo;
-    manifest.histogram.hi = ctx.hist_range.hi;
-    manifest.histogram.counts = fine;
-  } else {
-    // Exact integer counts, rebinned onto 256 bins over the values that occur.
-    manifest.histogram.lo = manifest.min_value;
-    manifest.histogram.hi = manifest.max_value;
-    const double span = std::max(1.0, manifest.max_value - manifest.min_value + 1);
-    for (size_t v = 0; v < fine.size(); ++v)
-      if (fine[v])
-        manifest.histogram.counts[size_t(std::clamp(
-            (double(v) + integer_min(format.type) - manifest.min_value) / span * 256, 0.0, 255.0))] += fine[v];
-  }
-  for (int l = 0; l < layout.levels; ++l) {
-    const auto& s = ctx.stats[size_t(l)];
-    manifest.stats.push_back({layout.brick_count(l), s.constant.load(), s.empty.load(), s.raw_bytes.load(),
-                              s.stored_bytes.load()});
-    result.stored_bytes += s.stored_bytes.load();
-  }
+
+  // A series killed after its last step's checkpoint has no step left to build: only the end.
+  if (!store) store = StoreWriter::reopen(target.path(), env, options.batch_bytes);
+  manifest.background = series.background;
+  summarise(series, format, manifest);
+  for (const LevelStats& s : manifest.stats) result.stored_bytes += s.stored_bytes;
   result.warnings = value_range_warnings(manifest.min_value, manifest.max_value);
-  if (const auto c = source.conversion()) result.conversion = c->summary();
-  store->finish(manifest, ctx.nodes);
+  if (const auto c = first.conversion()) result.conversion = c->summary();
+  if (steps > 1) store->finish_series(manifest);
+  else store->finish(manifest, last->nodes);
   store.reset();  // closed before its directory is swapped into place
   manifest.complete = true;
   result.manifest = manifest;
@@ -835,7 +755,7 @@ BuildResult build_store(VolumeSource& source, const std::string& dir, const Buil
     result.manifest = read_manifest(target.path());
   }
   target.commit();
-  result.input_bytes = source.input_bytes();
+  for (VolumeSource* s : sources) result.input_bytes += s->input_bytes();
   return result;
 }
 

@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 #include <utility>
@@ -85,6 +86,8 @@ struct BuildResult {
   bool rebuilt_incomplete = false;
   /// The finest slices an interrupted build had done when this one resumed it (0: from the start).
   int64_t resumed_at_slice = 0;
+  /// The time step a series build resumed in (0: the first, or from the start).
+  int resumed_at_step = 0;
   double seconds = 0;          ///< the bricks' build
   double octree_seconds = 0;   ///< BuildOptions::octree's build, when asked for
   uint64_t input_bytes = 0;
@@ -181,5 +184,14 @@ ResourceNeeds estimate_build_needs(const Vec3s& dims, ValueType type, const Buil
 /// for a rebuild beside a complete one, the old store as it was.
 BuildResult build_store(VolumeSource& source, const std::string& dir, const BuildOptions& options,
                         Progress* progress = nullptr);
+
+/// @brief Builds a store of several time steps of one grid, one source a step (every one of
+/// step 0's dims, type, spacing and origin, else Error(format) naming the step's file), as
+/// build_store builds one: step after step, each step's records and node table under keys that
+/// carry the step (storage/store.h), every step flattened against step 0's background. A killed
+/// build resumes within the step it was building; the steps before it are not read again.
+/// With one source it is build_store. BuildOptions::octree is refused for several steps.
+BuildResult build_series(std::span<VolumeSource* const> sources, const std::string& dir, const BuildOptions& options,
+                         Progress* progress = nullptr);
 
 }  // namespace brickyard

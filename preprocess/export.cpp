@@ -38,7 +38,8 @@ VoxelBox export_region(const Store& store, int level, const std::optional<VoxelB
 
 void for_each_region_slab(const Store& store, int level, const VoxelBox& region,
                           const std::function<void(int64_t, int64_t, std::span<const std::byte>)>& sink,
-                          Progress* progress) {
+                          Progress* progress, int step) {
+  (void)store.dataset(step);  // Error(invalid_argument) naming time_step for a step it does not have
   const BrickFormat& f = store.format();
   const int64_t M = f.brick_size, A = f.apron, E = f.edge();
   const size_t vs = size_of(f.type);
@@ -54,7 +55,7 @@ void for_each_region_slab(const Store& store, int level, const VoxelBox& region,
       auto txn = store.begin_read();
       for (int64_t b = b0; b < b1; ++b) {
         const BrickKey key{uint32_t(level), uint32_t(bx0 + b % nbx), uint32_t(by0 + b / nbx), uint32_t(bz)};
-        store.read_brick(txn, key, {bricks.data() + size_t(b) * f.bytes(), f.bytes()});
+        store.read_brick(txn, key, {bricks.data() + size_t(b) * f.bytes(), f.bytes()}, step);
       }
     });
     // Step 2: copy the interiors into a dense slab of the region.
@@ -80,7 +81,8 @@ void for_each_region_slab(const Store& store, int level, const VoxelBox& region,
 }
 
 RawVolumeInfo export_raw(const Store& store, int level, const VoxelBox& region, const std::string& path,
-                         Progress* progress) {
+                         Progress* progress, int step) {
+  (void)store.dataset(step);  // before the file is created
   AtomicFile file(path);
   std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> hash(XXH3_createState(), XXH3_freeState);
   XXH3_64bits_reset(hash.get());
@@ -95,7 +97,7 @@ RawVolumeInfo export_raw(const Store& store, int level, const VoxelBox& region, 
         XXH3_64bits_update(hash.get(), bytes.data(), bytes.size());
         extend_range(bytes, type, lo, hi);
       },
-      progress);
+      progress, step);
   file.commit();
   const Manifest& m = store.manifest();
   const double scale = double(int64_t(1) << store.layout().steps(level));
@@ -107,7 +109,8 @@ RawVolumeInfo export_raw(const Store& store, int level, const VoxelBox& region, 
   info.origin = m.origin + m.spacing * (Vec3d(region.lo) * scale + Vec3d((scale - 1) / 2));
   info.min_value = lo;
   info.max_value = hi;
-  info.source = fmt::format("store {} level {}", store.path(), level);
+  info.source = store.time_steps() > 1 ? fmt::format("store {} level {} time step {}", store.path(), level, step)
+                                        : fmt::format("store {} level {}", store.path(), level);
   info.bytes = written;
   info.xxh3_64 = XXH3_64bits_digest(hash.get());
   write_raw_sidecar(raw_sidecar_path(path), info);

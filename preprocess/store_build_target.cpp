@@ -27,8 +27,21 @@ namespace fs = std::filesystem;
 // identity: stores built before it was recorded stay up to date.
 std::string source_identity(const std::string& json) {
   nlohmann::json j = nlohmann::json::parse(json);
-  if (j.is_object()) j.erase("generator"), j.erase("checked_mtime_ns");
+  const auto strip = [](nlohmann::json& o) {
+    if (o.is_object()) o.erase("generator"), o.erase("checked_mtime_ns");
+  };
+  strip(j);
+  if (j.is_object() && j.contains("steps") && j["steps"].is_array())  // a time series: each step's own
+    for (auto& step : j["steps"]) strip(step);
   return j.dump();
+}
+
+/// Whether `before` describes the same file as `now`, checked then and unchanged since.
+bool same_checked_file(const nlohmann::json& before, const nlohmann::json& now) {
+  if (!before.is_object() || !now.is_object() || !now.contains("checked_mtime_ns")) return false;
+  for (const char* key : {"kind", "path", "bytes", "xxh3_64", "checked_mtime_ns"})
+    if (before.value(key, nlohmann::json()) != now.value(key, nlohmann::json())) return false;
+  return true;
 }
 
 /// The checkpoint an interrupted build of this same import left (same source, same parameters,
@@ -137,10 +150,15 @@ bool StoreBuildTarget::source_checked_before(const std::string& source_json) con
   if (previous_source_.empty()) return false;
   try {
     const nlohmann::json before = nlohmann::json::parse(previous_source_), now = nlohmann::json::parse(source_json);
-    if (!before.is_object() || !now.is_object() || !now.contains("checked_mtime_ns")) return false;
-    for (const char* key : {"kind", "path", "bytes", "xxh3_64", "checked_mtime_ns"})
-      if (before.value(key, nlohmann::json()) != now.value(key, nlohmann::json())) return false;
-    return true;
+    if (now.is_object() && now.value("kind", "") == "time_series") {  // every step's file
+      if (!before.is_object() || before.value("kind", "") != "time_series") return false;
+      const nlohmann::json &b = before.value("steps", nlohmann::json()), &n = now.value("steps", nlohmann::json());
+      if (!b.is_array() || !n.is_array() || b.size() != n.size()) return false;
+      for (size_t i = 0; i < n.size(); ++i)
+        if (!same_checked_file(b[i], n[i])) return false;
+      return true;
+    }
+    return same_checked_file(before, now);
   } catch (const nlohmann::json::exception&) {
     return false;
   }

@@ -372,7 +372,7 @@ BuildResult build_tet_store(const TetClusterSource& source, const std::string& d
 
   Manifest manifest;
   manifest.kind = DataKind::tetrahedral;
-  manifest.format_version = kStoreFormatVersion;
+  manifest.format_version = kMeshStoreFormatVersion;
   manifest.time_steps = source.time_steps();
   manifest.mesh.moving = source.moving();
   manifest.source = source_json;

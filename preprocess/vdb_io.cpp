@@ -278,8 +278,8 @@ struct BrickLeaves {
 
 class VdbWriter {
  public:
-  VdbWriter(const Store& store, int level, const VoxelBox& region, const VdbProvenance& source)
-      : store_(store), level_(level), region_(region), format_(store.format()),
+  VdbWriter(const Store& store, int level, const VoxelBox& region, const VdbProvenance& source, int step)
+      : store_(store), step_(step), level_(level), region_(region), format_(store.format()),
         background_(float(store.manifest().background)),
         // A level set's inactive voxels are +-background (outside and inside); a background that is
         // not positive cannot be a level set's, so such a store is written as a plain grid.
@@ -304,7 +304,7 @@ class VdbWriter {
       for (int64_t by = b0.y; by <= b1.y; ++by)
         for (int64_t bx = b0.x; bx <= b1.x; ++bx) {
           const BrickKey key{uint32_t(level_), uint32_t(bx), uint32_t(by), uint32_t(bz)};
-          const NodeRecord& node = store_.nodes().at(key);
+          const NodeRecord& node = store_.nodes(step_).at(key);
           if (!node.is_constant()) {
             varying.push_back(key);
             continue;
@@ -319,7 +319,7 @@ class VdbWriter {
         auto txn = store_.begin_read();
         std::vector<std::byte> voxels(format_.bytes());
         for (size_t i = i0; i < i1; ++i) {
-          store_.read_brick(txn, varying[i], voxels);
+          store_.read_brick(txn, varying[i], voxels, step_);
           converted[i] = dispatch_value_type(format_.type, [&](auto tag) {
             return to_leaves(varying[i], reinterpret_cast<const decltype(tag)*>(voxels.data()));
           });
@@ -419,6 +419,7 @@ class VdbWriter {
   }
 
   const Store& store_;
+  int step_;
   int level_;
   VoxelBox region_;
   BrickFormat format_;
@@ -514,11 +515,12 @@ std::unique_ptr<VolumeSource> open_vdb_source(const std::string& path, const std
 }
 
 void export_vdb(const Store& store, int level, const VoxelBox& region, const std::string& path,
-                const std::string& grid_name, Progress* progress) {
+                const std::string& grid_name, Progress* progress, int step) {
   initialize_openvdb();
   export_region(store, level, region);  // the same checks as every export: level and box
+  (void)store.dataset(step);            // and the time step
   const VdbProvenance source = read_provenance(store.manifest());
-  vdb::FloatGrid::Ptr grid = VdbWriter(store, level, region, source).run(progress);
+  vdb::FloatGrid::Ptr grid = VdbWriter(store, level, region, source, step).run(progress);
   grid->setName(!grid_name.empty() ? grid_name : (!source.grid.empty() ? source.grid : "density"));
   grid->insertMeta("brickyard_level", vdb::Int32Metadata(level));
   grid->insertMeta("brickyard_store", vdb::StringMetadata(store.path()));

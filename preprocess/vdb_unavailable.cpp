@@ -19,7 +19,7 @@ bool vdb_support() { return false; }
 
 std::unique_ptr<VolumeSource> open_vdb_source(const std::string& path, const std::string&) { no_openvdb(path); }
 
-void export_vdb(const Store&, int, const VoxelBox&, const std::string& path, const std::string&, Progress*) {
+void export_vdb(const Store&, int, const VoxelBox&, const std::string& path, const std::string&, Progress*, int) {
   no_openvdb(path);
 }
 

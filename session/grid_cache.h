@@ -15,8 +15,11 @@ namespace brickyard {
 
 class GridCache {
  public:
-  /// @throws Error(unsupported) for a store without a grid; the cache's errors for its budgets.
-  GridCache(const Store& store, const CacheConfig& config) : pages_(store, config), bricks_(pages_, store.dataset().grid()) {}
+  /// @brief The cache over time step `step` of the store's grid.
+  /// @throws Error(unsupported) for a store without a grid; Error(invalid_argument) for a step
+  /// it does not have; the cache's errors for its budgets.
+  GridCache(const Store& store, const CacheConfig& config, int step = 0)
+      : pages_(store.step_pages(step), config), bricks_(pages_, store.dataset(step).grid()) {}
 
   /// @brief PageCache::close(): stops the loader and writes the trace. @throws Error(io).
   void close() { pages_.close(); }

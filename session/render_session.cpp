@@ -107,6 +107,7 @@ RenderSession::RenderSession(const Scene& scene, const Options& options)
         .with_field(scene_.time_count == 1 ? "time_step" : "time_series");
   }
   normalize_values(scene_, dataset.info().min_value, dataset.info().max_value);
+  if (dataset.has_grid()) step_ = scene_.time_step;
   build_cache();
 }
 
@@ -121,7 +122,7 @@ void RenderSession::build_cache() {
   renderer_.reset();
   bricks_.reset();
   pages_.reset();
-  const Dataset& dataset = store_->dataset();
+  const Dataset& dataset = store_->dataset(step_);
   CacheConfig config = options_.cache ? *options_.cache : cache_config(scene_);
   const auto& reads = entry_->info.records;
   for (const PageKindInfo& k : store_->page_kinds())
@@ -129,7 +130,7 @@ void RenderSession::build_cache() {
       config.kinds[k.kind] = KindBudget{1, k.page_bytes, k.page_bytes};
   if (dataset.has_grid()) config = share_l1_budget(config, dataset.grid().shape().bytes(), entry_->info, params_);
   try {
-    pages_ = std::make_unique<PageCache>(*store_, config);
+    pages_ = std::make_unique<PageCache>(store_->step_pages(step_), config);
   } catch (const Error& e) {
     // A budget the scene gave that cannot hold one page is the scene's key to fix; a
     // configuration the caller gave (Options::cache) stays the caller's.
@@ -145,6 +146,18 @@ void RenderSession::build_cache() {
 
 void RenderSession::reset_cache() { build_cache(); }
 
+void RenderSession::follow_step(int step) {
+  if (store_->dataset().has_grid() && step != step_) show_step(step);
+}
+
+void RenderSession::show_step(int step) {
+  (void)store_->dataset(step);  // throws for a step the dataset does not have, before anything goes
+  renderer_.reset();
+  context_.reset();
+  step_ = step;
+  build_cache();
+}
+
 bool RenderSession::converged() const { return renderer_->converged(); }
 
 int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames, Settle how) {
@@ -152,6 +165,7 @@ int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames
 }
 
 int RenderSession::settle(const FrameSetup& frame_setup, int max_frames, Settle how) {
+  follow_step(frame_setup.time_step);  // before the guard below holds the back end
   struct CompleteFrames {  // off again however settle() ends
     Renderer& renderer;
     explicit CompleteFrames(Renderer& r, bool on) : renderer(r) { renderer.set_complete_frames(on); }
@@ -192,6 +206,7 @@ FrameStats RenderSession::render(int frame, FrameBuffers& out, const FrameOutput
 }
 
 FrameStats RenderSession::render(const FrameSetup& frame_setup, FrameBuffers& out) {
+  follow_step(frame_setup.time_step);
   return render_frame(*renderer_, *context_, frame_setup, out);
 }
 

@@ -6,8 +6,10 @@
 ///
 /// Ownership and lifetimes. A RenderSession owns, and destroys in reverse order: the Store
 /// (the dataset and its views), the PageCache and BrickCache, the RenderContext, the back end.
-/// - store(), dataset() and context() are valid for the session's whole life: reset_cache()
-///   keeps the same Store and RenderContext (the context is re-pointed at the new cache).
+/// - store() is valid for the session's whole life; dataset() and context() too, but for a grid
+///   of several time steps, whose frame of another step than the last one's replaces them (with
+///   the cache and back end: a new step is new data, cold): reset_cache() keeps the same Store
+///   and RenderContext (the context is re-pointed at the new cache).
 /// - pages(), bricks() and everything the back end holds are replaced by reset_cache(): a
 ///   reference taken before it must not be used after it. Take them again.
 /// - Handles from the cache must be released before reset_cache() and before the session ends.
@@ -45,7 +47,9 @@ class RenderSession {
   const BackendInfo& backend() const { return entry_->info; }
   const BackendParams& params() const { return params_; }
   const Store& store() const { return *store_; }
-  const Dataset& dataset() const { return store_->dataset(); }
+  /// @brief The dataset shown: for a grid of several time steps, the step of the last frame
+  /// (before any, the scene's time_step).
+  const Dataset& dataset() const { return store_->dataset(step_); }
   const RenderContext& context() const { return *context_; }
   /// @brief The cache, until the next reset_cache().
   PageCache& pages() { return *pages_; }
@@ -82,12 +86,17 @@ class RenderSession {
 
  private:
   void build_cache();
+  /// Replaces the cache, context and back end by ones over time step `step` of a grid series.
+  void show_step(int step);
+  /// show_step(step) where the dataset is a grid and the step is not the one shown.
+  void follow_step(int step);
 
   Scene scene_;
   Options options_;
   const BackendEntry* entry_ = nullptr;
   BackendParams params_;
   std::unique_ptr<Store> store_;
+  int step_ = 0;  ///< a grid's time step that the cache, context and back end hold
   std::unique_ptr<PageCache> pages_;
   std::unique_ptr<BrickCache> bricks_;
   std::unique_ptr<RenderContext> context_;

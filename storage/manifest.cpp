@@ -57,6 +57,11 @@ std::string Manifest::to_json() const {
   j["codec"] = {{"name", std::string(to_string(format.codec))}, {"hc_level", format.hc_level}, {"shuffle", format.shuffles()}};
   j["levels"] = levels;
   j["background"] = background;
+  if (time_steps > 1 && !step_ranges.empty()) {  // a series build writes them with its final manifest
+    json ranges = json::array();
+    for (const StepValueRange& r : step_ranges) ranges.push_back({r.min, r.max});
+    j["step_value_ranges"] = ranges;
+  }
   j["histogram"] = {{"lo", histogram.lo}, {"hi", histogram.hi}, {"counts", histogram.counts}};
   json st = json::array();
   for (const auto& s : stats)
@@ -160,6 +165,28 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
     if (mesh.contains("moving")) m.mesh.moving = rm.get<bool>("moving");
     return m;
   }
+  if (m.time_steps > 1) {
+    if (m.format_version < kTimeSeriesGridFormatVersion)
+      throw Error(Errc::format, fmt::format("a grid of {} time steps needs format version {} or later, not {}", m.time_steps,
+                                            kTimeSeriesGridFormatVersion, m.format_version))
+          .with_file(path)
+          .with_field("format_version");
+    // Written with the final manifest: an interrupted build's has none yet.
+    const auto ranges = m.complete || j.contains("step_value_ranges")
+                            ? r.get<std::vector<std::vector<double>>>("step_value_ranges")
+                            : std::vector<std::vector<double>>(size_t(m.time_steps), std::vector<double>{0.0, 0.0});
+    if (ranges.size() != size_t(m.time_steps))
+      throw Error(Errc::format, fmt::format("{} ranges for {} time steps", ranges.size(), m.time_steps))
+          .with_file(path)
+          .with_field("step_value_ranges");
+    for (size_t i = 0; i < ranges.size(); ++i) {
+      if (ranges[i].size() != 2 || !(ranges[i][0] <= ranges[i][1]))
+        throw Error(Errc::format, fmt::format("step {}: expected [min, max] with min <= max", i))
+            .with_file(path)
+            .with_field("step_value_ranges");
+      m.step_ranges.push_back({ranges[i][0], ranges[i][1]});
+    }
+  }
   m.dims = r.vec3<int64_t>("dims");
   m.spacing = r.vec3<double>("spacing");
   m.origin = r.vec3<double>("origin");
@@ -223,6 +250,8 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
                                             "and {}-byte pages", o.depth, o.page_bytes, ol.depth, ol.page_bytes()))
           .with_file(path)
           .with_field("octree");
+    if (m.time_steps > 1)
+      throw Error(Errc::format, "an octree volume over a grid of several time steps").with_file(path).with_field("octree");
     m.octree = o;
   }
   // The layout must agree with the recorded level count, or nothing else can be trusted.

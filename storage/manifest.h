@@ -21,9 +21,13 @@
 namespace brickyard {
 
 /// Version 1: grid stores (a manifest without `kind` is one). Version 2 adds tetrahedral
-/// stores; grid stores are still written as version 1, so older builds keep reading them.
-inline constexpr int kStoreFormatVersion = 2;
+/// stores; version 3 grids of several time steps, whose record and node-table keys carry the
+/// step. Single-step grids are still written as version 1 and meshes as version 2, so older
+/// builds keep reading them, and refuse what they cannot read.
+inline constexpr int kStoreFormatVersion = 3;
 inline constexpr int kGridStoreFormatVersion = 1;
+inline constexpr int kMeshStoreFormatVersion = 2;
+inline constexpr int kTimeSeriesGridFormatVersion = 3;
 
 struct Histogram {
   double lo = 0, hi = 0;          ///< bins split [lo, hi] evenly; values outside are clamped into the end bins
@@ -31,6 +35,12 @@ struct Histogram {
   uint64_t total() const;
   /// @brief Value below which a fraction q of the voxels lie (bin-resolution).
   double quantile(double q) const;
+};
+
+/// @brief One time step's value range over its finest level, in stored units.
+struct StepValueRange {
+  double min = 0, max = 0;
+  friend bool operator==(const StepValueRange&, const StepValueRange&) = default;
 };
 
 struct LevelStats {
@@ -63,10 +73,12 @@ struct Manifest {
   Vec3d origin{0.0};
   BrickFormat format;
   int levels = 0;
-  double min_value = 0, max_value = 0;  ///< over the finest level, in stored units
+  double min_value = 0, max_value = 0;  ///< over the finest level (of every step), in stored units
+  /// A grid of several time steps: each step's value range (its finest level), in step order.
+  std::vector<StepValueRange> step_ranges;
   double background = 0;
-  Histogram histogram;
-  std::vector<LevelStats> stats;
+  Histogram histogram;               ///< every step's voxels
+  std::vector<LevelStats> stats;     ///< summed over the steps
   /// An octree volume beside the bricks (`octree` database), written by build-octree; absent
   /// until one is complete.
   std::optional<OctreeSummary> octree;

@@ -102,6 +102,31 @@ std::array<std::byte, 8> brick_key_bytes(const BrickKey& key) {
   return out;
 }
 
+/// A record or node-table key of a grid of several time steps: the step (big-endian) before the
+/// single-step key, so that each step's records are contiguous and in the same order.
+std::array<std::byte, 12> step_key(uint32_t step, const std::array<std::byte, 8>& key) {
+  std::array<std::byte, 12> out;
+  for (int i = 0; i < 4; ++i) out[size_t(i)] = std::byte((step >> (24 - 8 * i)) & 0xff);
+  std::memcpy(out.data() + 4, key.data(), 8);
+  return out;
+}
+
+/// A key of either width, as LMDB takes it.
+struct KeyBytes {
+  std::array<std::byte, 12> bytes{};
+  size_t size = 8;
+  lmdb::Bytes span() const { return {bytes.data(), size}; }
+};
+KeyBytes keyed(bool series, int step, const std::array<std::byte, 8>& key) {
+  KeyBytes k;
+  if (series) {
+    k.bytes = step_key(uint32_t(step), key), k.size = 12;
+  } else {
+    std::memcpy(k.bytes.data(), key.data(), 8);
+  }
+  return k;
+}
+
 std::array<std::byte, 8> big_endian_id(uint64_t id) {
   std::array<std::byte, 8> out;
   for (int i = 0; i < 8; ++i) out[size_t(i)] = std::byte((id >> (56 - 8 * i)) & 0xff);
@@ -136,12 +161,29 @@ uint64_t elapsed_ns(std::chrono::steady_clock::time_point since) {
 /// A loader thread's reader: one read snapshot, kept while it reads (the store is immutable).
 class StoreReader final : public PageReader {
  public:
-  explicit StoreReader(const Store& store) : store_(store), txn_(store.begin_read()) {}
-  PageRead read(const PageKey& key, std::span<std::byte> out) override { return store_.read_page(txn_, key, out); }
+  StoreReader(const Store& store, int step) : store_(store), step_(step), txn_(store.begin_read()) {}
+  PageRead read(const PageKey& key, std::span<std::byte> out) override { return store_.read_page(txn_, key, out, step_); }
 
  private:
   const Store& store_;
+  int step_;
   lmdb::ReadTxn txn_;
+};
+
+/// Time step `step` (1 or later) of a grid of several, as the cache's L3 sees it: the store's
+/// records of that step under the same page keys as step 0's, so that a cache holds one step.
+class StepPages final : public PageSource {
+ public:
+  StepPages(const Store& store, int step) : store_(store), step_(step), name_(fmt::format("{} (time step {})", store.path(), step)) {}
+  const std::string& source_name() const override { return name_; }
+  std::vector<PageKindInfo> page_kinds() const override { return store_.page_kinds(); }
+  std::unique_ptr<PageReader> open_reader() const override { return std::make_unique<StoreReader>(store_, step_); }
+  std::string describe(const PageKey& key) const override { return fmt::format("{} of time step {}", store_.describe(key), step_); }
+
+ private:
+  const Store& store_;
+  int step_;
+  std::string name_;
 };
 
 }  // namespace
@@ -294,12 +336,14 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
     const Vec3d e = info.world.extent();
     const double volume = std::max(e.x, 1e-300) * std::max(e.y, 1e-300) * std::max(e.z, 1e-300);
     info.unit_length = manifest_.mesh.tets ? std::cbrt(volume / double(manifest_.mesh.tets)) : 1.0;
-    dataset_ = std::make_unique<Dataset>(std::move(info), std::nullopt,
-                                         TetView(clusters_, size_t(manifest_.mesh.page_bytes), manifest_.time_steps,
-                                                 step_ranges_));
+    datasets_.push_back(std::make_unique<Dataset>(std::move(info), std::nullopt,
+                                                  TetView(clusters_, size_t(manifest_.mesh.page_bytes), manifest_.time_steps,
+                                                          step_ranges_)));
     return;
   }
-  load_node_table(txn);
+  layout_ = manifest_.layout();
+  nodes_.resize(size_t(manifest_.time_steps));
+  for (int step = 0; step < manifest_.time_steps; ++step) load_node_table(txn, step);
   info.world = Box3d(manifest_.origin, manifest_.origin + manifest_.spacing * Vec3d(manifest_.dims - Vec3s(1)));
   info.unit_length = min_component(manifest_.spacing);
   std::optional<OctreeView> octree;
@@ -309,28 +353,57 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
     load_octree_table(txn);
     octree.emplace(octree_layout(), *manifest_.octree, std::span<const OctreePageRange>(octree_pages_));
   }
-  dataset_ = std::make_unique<Dataset>(std::move(info),
-                                       GridView(nodes_, manifest_.format.shape(), manifest_.origin, manifest_.spacing),
-                                       std::nullopt, std::move(octree));
+  for (int step = 0; step < manifest_.time_steps; ++step) {
+    datasets_.push_back(std::make_unique<Dataset>(
+        info, GridView(nodes_[size_t(step)], manifest_.format.shape(), manifest_.origin, manifest_.spacing), std::nullopt,
+        step == 0 ? std::move(octree) : std::nullopt));
+    if (step > 0) step_sources_.push_back(std::make_unique<StepPages>(*this, step));
+  }
 }
 
-void Store::load_node_table(const lmdb::ReadTxn& txn) {
+void Store::check_step(int step) const {
+  if (step < 0 || step >= manifest_.time_steps)
+    throw Error(Errc::invalid_argument, fmt::format("time step {} of a dataset with {} (0 to {})", step, manifest_.time_steps,
+                                                    manifest_.time_steps - 1))
+        .with_file(path_)
+        .with_field("time_step");
+}
+
+const Dataset& Store::dataset(int step) const {
+  check_step(step);
+  return kind() == DataKind::structured ? *datasets_[size_t(step)] : *datasets_.front();
+}
+
+const PageSource& Store::step_pages(int step) const {
+  check_step(step);
+  if (step == 0 || kind() != DataKind::structured) return *this;
+  return *step_sources_[size_t(step - 1)];
+}
+
+const NodeTable& Store::nodes(int step) const {
+  check_step(step);
+  return nodes_[size_t(step)];
+}
+
+void Store::load_node_table(const lmdb::ReadTxn& txn, int step) {
   const std::string& dir = path_;
-  layout_ = manifest_.layout();
-  nodes_ = NodeTable(layout_);
+  NodeTable& table = nodes_[size_t(step)];
+  table = NodeTable(layout_);
   if (nodes_db_.name.empty() || bricks_db_.name.empty()) {
     if (manifest_.complete) throw Error(Errc::corrupt, "complete store without node or brick database").with_file(dir);
     return;  // an incomplete store may have neither yet
   }
   if (!manifest_.complete) return;  // the node table is written last
 
+  const bool series = manifest_.time_steps > 1;
+  const std::string of_step = series ? fmt::format(" of time step {}", step) : "";
   for (int level = 0; level < layout_.levels; ++level) {
-    auto& records = nodes_.level(level);
+    auto& records = table.level(level);
     for (size_t start = 0, chunk = 0; start < records.size(); start += kNodesPerChunk, ++chunk) {
-      const auto key = node_chunk_key(uint32_t(level), uint32_t(chunk));
+      const KeyBytes key = keyed(series, step, node_chunk_key(uint32_t(level), uint32_t(chunk)));
       const size_t n = std::min(kNodesPerChunk, records.size() - start);
-      read_table_chunk(txn.get(nodes_db_, key), n * sizeof(NodeRecord), fmt::format("node table chunk {} of level {}", chunk, level),
-                       dir, records.data() + start);
+      read_table_chunk(txn.get(nodes_db_, key.span()), n * sizeof(NodeRecord),
+                       fmt::format("node table chunk {} of level {}{}", chunk, level, of_step), dir, records.data() + start);
     }
     // What the builder writes, and what readers rely on: an ordered range (its bounds may be
     // infinite: a conservative bound of values near the largest float rounds out to infinity),
@@ -402,17 +475,18 @@ void Store::load_cluster_table(const lmdb::ReadTxn& txn) {
 
 Store::~Store() = default;
 
-std::optional<std::span<const std::byte>> Store::record(const lmdb::ReadTxn& txn, const BrickKey& key) const {
-  return txn.get(bricks_db_, brick_key_bytes(key));
+std::optional<std::span<const std::byte>> Store::record(const lmdb::ReadTxn& txn, const BrickKey& key, int step) const {
+  check_step(step);
+  return txn.get(bricks_db_, keyed(manifest_.time_steps > 1, step, brick_key_bytes(key)).span());
 }
 
-void Store::read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<std::byte> out) const {
+void Store::read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<std::byte> out, int step) const {
   if (!layout_.contains(key))
     throw Error(Errc::not_found, fmt::format("brick is outside the store's {} levels", layout_.levels))
         .with_file(path_)
         .with_key(key.to_string());
   BY_CHECK_EQ(out.size(), format().bytes());
-  const NodeRecord& node = nodes_.at(key);
+  const NodeRecord& node = nodes(step).at(key);
   if (node.is_constant()) {
     dispatch_value_type(format().type, [&](auto tag) {
       using T = decltype(tag);
@@ -420,7 +494,7 @@ void Store::read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<
     });
     return;
   }
-  auto rec = record(txn, key);
+  auto rec = record(txn, key, step);
   if (!rec) throw Error(Errc::corrupt, "brick record is missing").with_file(path_).with_key(key.to_string());
   try {
     decode_brick(format(), key, *rec, out);
@@ -430,21 +504,21 @@ void Store::read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<
   }
 }
 
-void Store::read_brick(const BrickKey& key, std::span<std::byte> out) const {
+void Store::read_brick(const BrickKey& key, std::span<std::byte> out, int step) const {
   auto txn = begin_read();
-  read_brick(txn, key, out);
+  read_brick(txn, key, out, step);
 }
 
 std::vector<PageKindInfo> Store::page_kinds() const {
   if (kind() == DataKind::tetrahedral) return {{RecordKind::tet_cluster, size_t(manifest_.mesh.page_bytes), manifest_.mesh.clusters}};
-  uint64_t stored = 0;
-  for (const LevelStats& l : manifest_.stats) stored += uint64_t(l.bricks - l.constant);
+  uint64_t stored = 0;  // a step's, on average: the stats are summed over the steps
+  for (const LevelStats& l : manifest_.stats) stored += uint64_t(l.bricks - l.constant) / uint64_t(manifest_.time_steps);
   std::vector<PageKindInfo> kinds{{RecordKind::brick, format().bytes(), stored}};
   if (manifest_.octree) kinds.push_back({RecordKind::octree_page, size_t(manifest_.octree->page_bytes), manifest_.octree->pages});
   return kinds;
 }
 
-std::unique_ptr<PageReader> Store::open_reader() const { return std::make_unique<StoreReader>(*this); }
+std::unique_ptr<PageReader> Store::open_reader() const { return std::make_unique<StoreReader>(*this, 0); }
 
 std::string Store::describe(const PageKey& key) const {
   if (key.kind == RecordKind::brick) return BrickKey::from_code(key.id).to_string();
@@ -453,7 +527,7 @@ std::string Store::describe(const PageKey& key) const {
   return to_string(key);
 }
 
-PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const {
+PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out, int step) const {
   const bool brick = key.kind == RecordKind::brick && kind() == DataKind::structured;
   const bool cluster = key.kind == RecordKind::tet_cluster && kind() == DataKind::tetrahedral;
   if (key.kind == RecordKind::octree_page && manifest_.octree) return read_octree_page(txn, key, out);
@@ -468,11 +542,11 @@ PageRead Store::read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::spa
       throw Error(Errc::not_found, fmt::format("brick is outside the store's {} levels", layout_.levels))
           .with_file(path_)
           .with_key(k.to_string());
-    if (nodes_.at(k).is_constant()) {  // no record: the node's value, as read_brick gives it
-      read_brick(txn, k, out);
+    if (nodes(step).at(k).is_constant()) {  // no record: the node's value, as read_brick gives it
+      read_brick(txn, k, out, step);
       return read;
     }
-    auto rec = record(txn, k);
+    auto rec = record(txn, k, step);
     if (!rec) throw Error(Errc::corrupt, "brick record is missing").with_file(path_).with_key(k.to_string());
     read.stored_bytes = rec->size();
     const auto start = std::chrono::steady_clock::now();
@@ -572,9 +646,21 @@ void Store::for_each_page(const lmdb::ReadTxn& txn, RecordKind kind,
 
 void Store::for_each_record(const lmdb::ReadTxn& txn,
                                  const std::function<bool(const BrickKey&, std::span<const std::byte>)>& f) const {
+  for_each_step_record(txn, [&](int, const BrickKey& k, std::span<const std::byte> r) { return f(k, r); });
+}
+
+void Store::for_each_step_record(const lmdb::ReadTxn& txn,
+                                 const std::function<bool(int, const BrickKey&, std::span<const std::byte>)>& f) const {
+  const bool series = manifest_.time_steps > 1;
+  const size_t width = series ? 12 : 8;
   txn.for_each(bricks_db_, [&](lmdb::Bytes key, lmdb::Bytes value) {
-    if (key.size() != 8) throw Error(Errc::corrupt, fmt::format("brick key of {} bytes", key.size())).with_file(path_);
-    return f(BrickKey::from_bytes(reinterpret_cast<const uint8_t*>(key.data())), value);
+    if (key.size() != width)
+      throw Error(Errc::corrupt, fmt::format("brick key of {} bytes (a {} has {}-byte keys)", key.size(),
+                                             series ? "grid of several time steps" : "grid", width))
+          .with_file(path_);
+    uint32_t step = 0;
+    for (size_t i = 0; series && i < 4; ++i) step = (step << 8) | uint32_t(key[i]);
+    return f(int(step), BrickKey::from_bytes(reinterpret_cast<const uint8_t*>(key.data() + width - 8)), value);
   });
 }
 
@@ -585,7 +671,7 @@ uint64_t Store::record_count() const {
 
 StoreWriter::StoreWriter(const std::string& dir, const Manifest& initial, const lmdb::EnvOptions& options,
                          uint64_t batch_bytes)
-    : kind_(initial.kind) {
+    : kind_(initial.kind), time_steps_(initial.time_steps) {
   if (is_store_directory(dir)) throw Error(Errc::internal, "StoreWriter needs a directory without a store").with_file(dir);
   env_ = std::make_unique<lmdb::Env>(dir, options);
   manifest_db_ = env_->open_database(kManifestDb, true);
@@ -599,7 +685,8 @@ StoreWriter::StoreWriter(const std::string& dir, const Manifest& initial, const 
   writer_ = std::make_unique<lmdb::BatchWriter>(*env_, batch_bytes);
   Manifest m = initial;
   m.complete = false;
-  if (kind_ == DataKind::tetrahedral) m.format_version = std::max(m.format_version, kStoreFormatVersion);
+  if (kind_ == DataKind::tetrahedral) m.format_version = std::max(m.format_version, kMeshStoreFormatVersion);
+  if (kind_ == DataKind::structured && time_steps_ > 1) m.format_version = std::max(m.format_version, kTimeSeriesGridFormatVersion);
   put_manifest(*writer_, manifest_db_, m.to_json());
   writer_->commit();
 }
@@ -614,6 +701,10 @@ std::unique_ptr<StoreWriter> StoreWriter::reopen(const std::string& dir, const l
   w->nodes_db_ = w->env_->open_database(kNodesDb, true);
   w->bricks_db_ = w->env_->open_database(kBricksDb, true);
   w->writer_ = std::make_unique<lmdb::BatchWriter>(*w->env_, batch_bytes);
+  {
+    const lmdb::ReadTxn txn(*w->env_);
+    w->time_steps_ = load_manifest(txn, w->manifest_db_, dir).time_steps;
+  }
   return w;
 }
 
@@ -637,9 +728,32 @@ void StoreWriter::put_checkpoint(std::span<const std::byte> state) {
   writer_->commit();
 }
 
-void StoreWriter::put_brick(const BrickKey& key, std::vector<std::byte>&& record) {
-  BY_CHECK(kind_ == DataKind::structured);
-  writer_->put(bricks_db_, brick_key_bytes(key), std::move(record));
+void StoreWriter::put_brick(const BrickKey& key, std::vector<std::byte>&& record, int step) {
+  BY_CHECK(kind_ == DataKind::structured && step >= 0 && step < time_steps_);
+  writer_->put(bricks_db_, keyed(time_steps_ > 1, step, brick_key_bytes(key)).span(), std::move(record));
+}
+
+void StoreWriter::put_step_nodes(int step, const NodeTable& nodes) {
+  BY_CHECK(kind_ == DataKind::structured && time_steps_ > 1 && step >= 0 && step < time_steps_);
+  const GridLayout& layout = nodes.layout();
+  for (int level = 0; level < layout.levels; ++level) {
+    const auto& records = nodes.level(level);
+    for (size_t start = 0, chunk = 0; start < records.size(); start += kNodesPerChunk, ++chunk) {
+      const size_t n = std::min(kNodesPerChunk, records.size() - start);
+      writer_->put(nodes_db_, keyed(true, step, node_chunk_key(uint32_t(level), uint32_t(chunk))).span(),
+                   checksummed_chunk(records.data() + start, n * sizeof(NodeRecord)));
+    }
+  }
+}
+
+void StoreWriter::finish_series(const Manifest& final_manifest) {
+  BY_CHECK(kind_ == DataKind::structured && time_steps_ > 1 && final_manifest.time_steps == time_steps_);
+  BY_CHECK_EQ(final_manifest.step_ranges.size(), size_t(time_steps_));
+  writer_->commit();
+  env_->sync();  // every brick and node table is durable before anything claims the store is complete
+  Manifest m = final_manifest;
+  m.format_version = std::max(m.format_version, kTimeSeriesGridFormatVersion);
+  commit_final(m);
 }
 
 void StoreWriter::put_cluster(uint64_t cluster, std::span<const std::byte> page) {
@@ -653,7 +767,7 @@ void StoreWriter::put_cluster_record(uint64_t cluster, std::vector<std::byte>&& 
 }
 
 void StoreWriter::finish(const Manifest& final_manifest, const NodeTable& nodes) {
-  BY_CHECK(kind_ == DataKind::structured && final_manifest.kind == DataKind::structured);
+  BY_CHECK(kind_ == DataKind::structured && final_manifest.kind == DataKind::structured && time_steps_ == 1);
   writer_->commit();
   env_->sync();  // every brick is durable before anything claims the store is complete
   const GridLayout& layout = nodes.layout();
@@ -685,7 +799,7 @@ void StoreWriter::finish(const Manifest& final_manifest, const std::vector<TetCl
       writer_->put(clusters_db_, step_ranges_key(chunk), checksummed_chunk(step_ranges.data() + start, n * sizeof(TetStepRange)));
     }
   Manifest m = final_manifest;
-  m.format_version = std::max(m.format_version, kStoreFormatVersion);
+  m.format_version = std::max(m.format_version, kMeshStoreFormatVersion);
   commit_final(m);
 }
 
@@ -706,6 +820,10 @@ OctreeWriter::OctreeWriter(Store& store, uint64_t batch_bytes) : store_(store) {
   if (store.kind() != DataKind::structured)
     throw Error(Errc::unsupported, "an octree volume is built over a grid; this store is a tetrahedral mesh").with_file(store.path());
   if (store.env_->options().read_only) throw Error(Errc::internal, "OctreeWriter needs a store opened writable").with_file(store.path());
+  if (store.time_steps() > 1)
+    throw Error(Errc::unsupported, fmt::format("an octree volume is built over a grid of one time step; this one has {}",
+                                               store.time_steps()))
+        .with_file(store.path());
   writer_ = std::make_unique<lmdb::BatchWriter>(*store.env_, batch_bytes);
   if (store.manifest_.octree) {  // the manifest stops claiming the old octree before its pages go
     Manifest m = store.manifest_;

@@ -3,7 +3,9 @@
 /// @brief A dataset's store on disk: one LMDB environment per dataset directory. The database
 /// `manifest` (JSON) says what the dataset is (its kind); the others hold its records:
 /// - a grid (kind `structured`): `nodes` (the node table) and `bricks` (brick records keyed by
-///   the big-endian level-major Morton code of their BrickKey);
+///   the big-endian level-major Morton code of their BrickKey); a grid of several time steps
+///   (format version 3) has a node table per step and keys that start with the big-endian step,
+///   so that each step's records are contiguous;
 ///   and, once build-octree has run, `octree` (octree volume pages keyed by the big-endian id
 ///   of dataset/octree.h);
 /// - a tetrahedral mesh: `tet_clusters` (the cluster table) and `tets` (cluster page records
@@ -70,12 +72,22 @@ class Store : public PageSource {
   const std::string& path() const { return path_; }
   const Manifest& manifest() const { return manifest_; }
   DataKind kind() const { return manifest_.kind; }
-  /// @brief What back ends see: the generic part and the typed view of the store's kind.
-  const Dataset& dataset() const { return *dataset_; }
+  /// @brief What back ends see: the generic part and the typed view of the store's kind (a grid
+  /// of several time steps: step 0's).
+  const Dataset& dataset() const { return *datasets_.front(); }
+  /// @brief Time step `step` of a grid of several (its node table; its value range is the whole
+  /// series', so that a transfer function means the same at every step); a mesh's one dataset
+  /// holds all its steps. @throws Error(invalid_argument) naming `time_step` outside the steps.
+  const Dataset& dataset(int step) const;
+  /// @brief The records of time step `step` as a PageSource (the cache's L3 while that step is
+  /// shown): the store itself for step 0 and for meshes. @throws as dataset(step).
+  const PageSource& step_pages(int step) const;
+  int time_steps() const { return manifest_.time_steps; }
   // Grid stores:
   const GridLayout& layout() const { return layout_; }
   const BrickFormat& format() const { return manifest_.format; }
-  const NodeTable& nodes() const { return nodes_; }
+  const NodeTable& nodes() const { return nodes_.front(); }
+  const NodeTable& nodes(int step) const;
   // Tetrahedral stores:
   const std::vector<TetCluster>& clusters() const { return clusters_; }
   /// @brief Clusters x steps scalar ranges (cluster-major); empty for one time step.
@@ -91,31 +103,37 @@ class Store : public PageSource {
   std::vector<PageKindInfo> page_kinds() const override;
   std::unique_ptr<PageReader> open_reader() const override;
   std::string describe(const PageKey& key) const override;
-  /// @brief Decodes any page into `out` (its kind's page size); errors as read_brick's.
-  PageRead read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const;
+  /// @brief Decodes any page (of time step `step`) into `out` (its kind's page size); errors as
+  /// read_brick's.
+  PageRead read_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out, int step = 0) const;
 
   /// @brief A read snapshot for zero-copy record access from the calling thread.
   lmdb::ReadTxn begin_read() const { return lmdb::ReadTxn(*env_); }
-  /// @brief The stored record of a brick (nullopt for constant nodes, which have none).
-  std::optional<std::span<const std::byte>> record(const lmdb::ReadTxn& txn, const BrickKey& key) const;
+  /// @brief The stored record of a brick of time step `step` (nullopt for constant nodes, which
+  /// have none).
+  std::optional<std::span<const std::byte>> record(const lmdb::ReadTxn& txn, const BrickKey& key, int step = 0) const;
   /// @brief Decodes a brick into `out` (format().bytes()); constant nodes are filled with their
   /// value. Errors name the key: not_found outside the layout or for a missing record,
   /// corrupt for a record that fails its checks.
-  void read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<std::byte> out) const;
-  void read_brick(const BrickKey& key, std::span<std::byte> out) const;
+  void read_brick(const lmdb::ReadTxn& txn, const BrickKey& key, std::span<std::byte> out, int step = 0) const;
+  void read_brick(const BrickKey& key, std::span<std::byte> out, int step = 0) const;
   /// @brief Calls f(key, record) for every stored page record of a kind, in key order.
   void for_each_page(const lmdb::ReadTxn& txn, RecordKind kind,
                      const std::function<bool(const PageKey&, std::span<const std::byte>)>& f) const;
-  /// @brief Calls f(key, record) for every stored brick record in key order.
+  /// @brief Calls f(key, record) for every stored brick record in key order (of every time step).
   void for_each_record(const lmdb::ReadTxn& txn,
                        const std::function<bool(const BrickKey&, std::span<const std::byte>)>& f) const;
+  /// @brief Calls f(step, key, record) for every stored brick record, in step then key order.
+  void for_each_step_record(const lmdb::ReadTxn& txn,
+                            const std::function<bool(int, const BrickKey&, std::span<const std::byte>)>& f) const;
   /// @brief Stored records of the store's page kind (bricks, or cluster pages).
   uint64_t record_count() const;
 
  private:
   friend class OctreeWriter;
   // Each reads from `txn`, the constructor's one snapshot of the store (see Store::Store).
-  void load_node_table(const lmdb::ReadTxn& txn);
+  void load_node_table(const lmdb::ReadTxn& txn, int step);
+  void check_step(int step) const;
   void load_cluster_table(const lmdb::ReadTxn& txn);
   void load_octree_table(const lmdb::ReadTxn& txn);
   PageRead read_octree_page(const lmdb::ReadTxn& txn, const PageKey& key, std::span<std::byte> out) const;
@@ -125,11 +143,12 @@ class Store : public PageSource {
   lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_, octree_db_;
   Manifest manifest_;
   GridLayout layout_;
-  NodeTable nodes_;
+  std::vector<NodeTable> nodes_;  ///< one per time step of a grid; sized at open, never after
   std::vector<TetCluster> clusters_;
   std::vector<TetStepRange> step_ranges_;
   std::vector<OctreePageRange> octree_pages_;
-  std::unique_ptr<Dataset> dataset_;
+  std::vector<std::unique_ptr<Dataset>> datasets_;        ///< one per time step of a grid
+  std::vector<std::unique_ptr<PageSource>> step_sources_;  ///< steps 1 and later of a grid
 };
 
 /// @brief Writes a new store of the initial manifest's kind. The constructor commits a manifest
@@ -151,13 +170,18 @@ class StoreWriter {
   /// finish() removes it in the last transaction.
   void put_checkpoint(std::span<const std::byte> state);
 
-  /// @brief A grid store's encoded brick record (encode_brick).
-  void put_brick(const BrickKey& key, std::vector<std::byte>&& record);
+  /// @brief A grid store's encoded brick record (encode_brick), of time step `step`.
+  void put_brick(const BrickKey& key, std::vector<std::byte>&& record, int step = 0);
+  /// @brief A grid of several time steps: the node table of a step, written when the step is
+  /// built (committed with the next checkpoint); finish_series() then commits the manifest.
+  void put_step_nodes(int step, const NodeTable& nodes);
   /// @brief A tetrahedral store's cluster page (its used bytes; encoded here).
   void put_cluster(uint64_t cluster, std::span<const std::byte> page);
   /// @brief A cluster page already encoded (encode_page), for builders that compress in parallel.
   void put_cluster_record(uint64_t cluster, std::vector<std::byte>&& record);
   void finish(const Manifest& final_manifest, const NodeTable& nodes);
+  /// @brief A grid of several time steps, every step's node table put: the final manifest.
+  void finish_series(const Manifest& final_manifest);
   /// @param step_ranges  clusters x time steps ranges (cluster-major) for more than one step.
   void finish(const Manifest& final_manifest, const std::vector<TetCluster>& clusters,
               const std::vector<TetStepRange>& step_ranges = {});
@@ -170,6 +194,7 @@ class StoreWriter {
   void commit_final(Manifest m);
 
   DataKind kind_ = DataKind::structured;
+  int time_steps_ = 1;
   std::unique_ptr<lmdb::Env> env_;
   lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_;
   std::unique_ptr<lmdb::BatchWriter> writer_;

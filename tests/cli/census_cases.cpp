@@ -417,6 +417,22 @@ void add_nrrd_and_vdb_cases(std::vector<Case>& c) {
   // nifticlib, every NIfTI file is refused alike, so only the option check is a case then.
   c.push_back({"import", "--time-step for a raw file", {}, "brickyard import " + raw16 + " --time-step 1 --out $TMP/i.store", 2,
                "field '--time-step': does not apply to a raw file"});
+  // Several files: the time steps of one grid.
+  c.push_back({"import", "time steps: a step of another grid",
+               sidecar("t2", [](nlohmann::json& j) {
+                 j["dims"] = {16, 16, 16};
+                 j["spacing"] = {1, 1, 2};
+                 j.erase("xxh3_64");
+               }),
+               "brickyard import $TMP/s.raw $TMP/t2.raw --out $TMP/i.store", 1,
+               "$TMP/t2.raw: time step 1 has spacing 1,1,2 and origin 0,0,0, but step 0 ($TMP/s.raw) is 16x16x16 u8 voxels"});
+  c.push_back({"import", "time steps: fields", {}, "brickyard import field:sphere field:torus --size 16 --out $TMP/i.store", 2,
+               "field:sphere: several sources are the time steps of one grid: volume files only"});
+  c.push_back({"import", "time steps: --time-step all with several files", {},
+               "brickyard import $SRC/tests/data/nifti/4d.nii $SRC/tests/data/nifti/4d.nii --time-step all --out $TMP/i.store", 2,
+               "field '--time-step': takes the time steps of one 4D file"});
+  c.push_back({"import", "--time-step not a step", {}, "brickyard import $SRC/tests/data/nifti/4d.nii --time-step 1.5 --out $TMP/i.store",
+               2, "field '--time-step': '1.5' is not a time step (0, 1, ... or all)"});
 #if BRICKYARD_HAVE_NIFTI
   c.push_back({"import", "NIfTI: data truncated",
                [](const Workspace& ws) {
@@ -562,6 +578,10 @@ void add_render_cases(std::vector<Case>& c) {
   c.push_back({"render", "--frames past the path", {}, render + "--frames 3 -o $TMP/x.png", 2,
                "field '--frames': '3' is outside the scene's frames 0-0"});
   c.push_back({"render", "--frames not a list", {}, render + "--frames abc -o $TMP/x.png", 2, "field '--frames': 'abc'"});
+  c.push_back({"render", "--time-step past the dataset's steps", {}, render + "--time-step 2 -o $TMP/x.png", 2,
+               "field 'time_step': time step 2 of a dataset with 1 (0 to 0)"});
+  c.push_back({"render", "--set time_step not a step", {}, render + "--set time_step=-1 -o $TMP/x.png", 2,
+               "field '--set time_step': '-1' is not a time step"});
   c.push_back({"render", "no scene", {}, "brickyard render -o $TMP/x.png", 2, "field 'SCENE': a scene file is required"});
   c.push_back({"render", "no -o", {}, render, 2, "field '-o': an output PNG is required"});
   c.push_back({"render", "-o is a directory", {}, render + "-o $TMP/plain", 1,
@@ -623,6 +643,11 @@ void add_store_cases(std::vector<Case>& c) {
   c.push_back({"store", "a file that is not a store", {}, "brickyard info $TMP/afile", 1,
                "$TMP/afile: not a brickyard store (not a directory)"});
   c.push_back({"store", "no such store", {}, "brickyard verify $TMP/missing.store", 1, "$TMP/missing.store: no such store"});
+  c.push_back({"store", "export: a time step the store does not have", {},
+               "brickyard export $TMP/grid.store --time-step 1 --out $TMP/x.raw", 2,
+               "$TMP/grid.store: field '--time-step': time step 1 of a store with 1 (0 to 0)"});
+  c.push_back({"store", "export: --time-step of a mesh", {}, "brickyard export $TMP/mesh.store --time-step 0 --out $TMP/x.vtu", 2,
+               "field '--time-step': a mesh exports whole, every time step in its .vtu"});
   c.push_back({"store", "data.mdb that is not LMDB",
                [](const Workspace& ws) {
                  fs::create_directory(ws.file("junk.store"));
@@ -698,8 +723,9 @@ void add_cache_cases(std::vector<Case>& c) {
   c.push_back({"cache", "--loaders zero", {}, flight + "--loaders 0", 2, "0 loader threads"});
   c.push_back({"cache", "--lod zero", {}, flight + "--lod 0", 2, "'--lod'"});
   c.push_back({"cache", "--frames zero", {}, flight + "--frames 0", 2, "'--frames'"});
-  c.push_back({"cache", "--values over a grid", {}, flight + "--values 0,1", 2,
-               "$TMP/grid.store: --values and --time-step apply to meshes"});
+  c.push_back({"cache", "--values over a grid", {}, flight + "--values 0,1", 2, "$TMP/grid.store: --values applies to meshes"});
+  c.push_back({"cache", "--time-step past a grid's steps", {}, flight + "--time-step 1", 2,
+               "field '--time-step': time step 1 of a grid with 1"});
   c.push_back({"cache", "--path missing", {}, "brickyard flight $TMP/grid.store --path $TMP/nothere.json", 1,
                "$TMP/nothere.json: cannot open"});
   c.push_back({"cache", "path without keyframes", text("nokeys.json", R"({"frames": 2, "camera_path": {"keyframes": []}})"),

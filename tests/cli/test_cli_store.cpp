@@ -226,7 +226,7 @@ TEST(CliStore, DirectoriesThatAreNotStoresAndNewerFormatsAreRefused) {
   }
   r = brickyard("info " + dir.file("s"));
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_TRUE(contains(r.output, "store format version 99 is newer than this build reads (2)")) << r.output;
+  EXPECT_TRUE(contains(r.output, "store format version 99 is newer than this build reads (3)")) << r.output;
 }
 
 TEST(CliStore, VerifyNamesACorruptedBrick) {

@@ -239,5 +239,46 @@ TEST(Resume, AnotherImportOrAnUnreadableCheckpointStartsOver) {
   expect_same_store(dir.file("t"), dir.file("clean-o"));
 }
 
+TEST(Resume, ASeriesKilledInALaterStepResumesThereWithoutReadingTheStepsBefore) {
+  const Vec3s dims{24, 20, 40};
+  const char* const fields[] = {"sphere", "torus", "gyroid"};
+  const int64_t never = std::numeric_limits<int64_t>::max();
+  testing::TempDir dir;
+  const BuildOptions o = every_row();
+  {
+    std::vector<std::unique_ptr<VolumeSource>> owned;
+    std::vector<VolumeSource*> steps;
+    for (const char* f : fields) owned.push_back(make_field_source(make_field(f), dims, ValueType::u16)), steps.push_back(owned.back().get());
+    build_series(steps, dir.file("clean"), o);
+  }
+  // Killed inside step 1 (after some of its rows), then inside step 2 at its first slice (the
+  // checkpoint between steps 1 and 2 is the last), each time resumed where it stopped.
+  for (const auto& [killed_step, stop, resumed_step, resumed_slice] :
+       {std::tuple{1, int64_t(21), 1, int64_t(17)}, std::tuple{2, int64_t(0), 2, int64_t(0)}}) {
+    SCOPED_TRACE(fmt::format("killed in step {} at slice {}", killed_step, stop));
+    const std::string s = dir.file(fmt::format("s{}", killed_step));
+    std::vector<std::unique_ptr<Interrupted>> first, second;
+    for (int k = 0; k < 3; ++k) first.push_back(std::make_unique<Interrupted>(fields[k], dims, ValueType::u16, k == killed_step ? stop : never));
+    std::vector<VolumeSource*> steps;
+    for (auto& p : first) steps.push_back(p.get());
+    EXPECT_THROW(build_series(steps, s, o), Error);
+    EXPECT_EQ(probe_store(s), StoreState::incomplete);
+    steps.clear();
+    for (int k = 0; k < 3; ++k) second.push_back(std::make_unique<Interrupted>(fields[k], dims, ValueType::u16, never)), steps.push_back(second.back().get());
+    const BuildResult r = build_series(steps, s, o);
+    EXPECT_FALSE(r.rebuilt_incomplete);
+    EXPECT_EQ(r.resumed_at_step, resumed_step);
+    EXPECT_EQ(r.resumed_at_slice, resumed_slice);
+    for (int k = 0; k < resumed_step; ++k) EXPECT_EQ(second[size_t(k)]->reads(), 0) << "step " << k << " read again";
+    EXPECT_EQ(second[size_t(resumed_step)]->reads(), dims.z - resumed_slice);
+    const Store a(s), b(dir.file("clean"));
+    EXPECT_TRUE(testing::all_records(a) == testing::all_records(b));
+    EXPECT_EQ(a.manifest().to_json(), b.manifest().to_json());
+    for (int k = 0; k < 3; ++k)
+      for (int l = 0; l < a.layout().levels; ++l) EXPECT_TRUE(a.nodes(k).level(l) == b.nodes(k).level(l)) << k << " " << l;
+    EXPECT_FALSE(read_build_checkpoint(s).has_value());
+  }
+}
+
 }  // namespace
 }  // namespace brickyard
