@@ -327,6 +327,9 @@ void run_import(ImportOptions o) {
   for (const auto& s : sources) steps.push_back(s.get()), input_bytes += s->input_bytes();
   if (steps.size() == 1)
     std::cout << fmt::format("import {} ({}x{}x{} {}) -> {}\n", source->name(), d.x, d.y, d.z, to_string(source->type()), o.out);
+  else if (steps.back()->name() == source->name())  // a 4D file's volumes
+    std::cout << fmt::format("import {} time steps of {} ({}x{}x{} {} each) -> {}\n", steps.size(), source->name(), d.x, d.y,
+                             d.z, to_string(source->type()), o.out);
   else
     std::cout << fmt::format("import {} time steps, {} to {} ({}x{}x{} {} each) -> {}\n", steps.size(), source->name(),
                              steps.back()->name(), d.x, d.y, d.z, to_string(source->type()), o.out);

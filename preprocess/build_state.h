@@ -73,6 +73,7 @@ class StateReader {
     const auto n = get<uint64_t>();
     if (n > (bytes_.size() - at_) / sizeof(T)) throw Error(Errc::corrupt, "the build checkpoint ends early");
     std::vector<T> v(static_cast<size_t>(n));
+    if (n == 0) return v;  // (memcpy from or to an empty vector's null data is undefined)
     std::memcpy(v.data(), take(size_t(n) * sizeof(T)).data(), size_t(n) * sizeof(T));
     return v;
   }

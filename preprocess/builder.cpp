@@ -665,7 +665,8 @@ BuildResult build_series(std::span<VolumeSource* const> sources, const std::stri
   std::unique_ptr<StoreWriter> store;  // opened once the first step is prepared: a refused volume writes nothing
 
   std::optional<BuildContext> last;  // the last step's context: its node table for a one-step store
-  for (int step = series.step; step < steps; ++step) {
+  const int first_step = series.step;  // where this run starts: a resumed build's step, else 0
+  for (int step = first_step; step < steps; ++step) {
     VolumeSource& source = *sources[size_t(step)];
     BuildContext& ctx = last.emplace(size_t(layout.levels));
     ctx.format = format;
@@ -693,7 +694,7 @@ BuildResult build_series(std::span<VolumeSource* const> sources, const std::stri
     if (!store)
       store = resume ? StoreWriter::reopen(target.path(), env, options.batch_bytes)
                      : std::make_unique<StoreWriter>(target.path(), manifest, env, options.batch_bytes);
-    if (progress && step == series.step && (z_start > 0 || step > 0)) {
+    if (progress && step == first_step && (z_start > 0 || step > 0)) {
       uint64_t done = input_bytes_before(source, z_start);
       for (int s = 0; s < step; ++s) done += sources[size_t(s)]->input_bytes();
       progress->start_at(done);
