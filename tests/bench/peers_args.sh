@@ -68,4 +68,14 @@ expect 2 "--store: /nonexistent.store: no such directory" --brickyard "$by" --st
 expect 2 "no field 'no-such-field' (it has: .*fbm" --brickyard "$by" --field no-such-field
 expect 1 "no brickyard executable" --brickyard /nonexistent/brickyard --field fbm
 
+peers="$1/bench/peers/vdb.sh"
+expect 0 "usage: bench/peers/vdb.sh" --help
+expect 2 "unknown argument '--iso'" --iso 0
+expect 2 "--vdb: /nonexistent.vdb: no such file" --vdb /nonexistent.vdb
+expect 2 "--size: '4' is not an integer in \\[8, 4096\\]" --size 4
+expect 2 "--eye: '1,2' is not X,Y,Z" --eye 1,2
+expect 2 "--fov: '180' is not an angle" --fov 180
+expect 2 "--frames: '1' is not an integer of at least 2" --frames 1
+expect 1 "no brickyard executable" --brickyard /nonexistent/brickyard
+
 [ "$failures" -eq 0 ] && echo "all cases passed" || { echo "$failures case(s) failed"; exit 1; }
