@@ -28,7 +28,9 @@ std::vector<std::byte> smooth_brick(const BrickFormat& f, double scale) {
 std::vector<std::byte> brick_for(const BrickFormat& f) {
   switch (f.type) {
     case ValueType::u8: return smooth_brick<uint8_t>(f, 80);
+    case ValueType::i8: return smooth_brick<int8_t>(f, -40);  // negative: the sign bits shuffled too
     case ValueType::u16: return smooth_brick<uint16_t>(f, 20000);
+    case ValueType::i16: return smooth_brick<int16_t>(f, -12000);
     case ValueType::f32: return smooth_brick<float>(f, 1.0);
   }
   return {};
@@ -36,7 +38,7 @@ std::vector<std::byte> brick_for(const BrickFormat& f) {
 
 TEST(BrickCodec, RoundTripsEveryTypeCodecAndShuffle) {
   const BrickKey key{3, 5, 6, 7};
-  for (ValueType t : {ValueType::u8, ValueType::u16, ValueType::f32})
+  for (ValueType t : {ValueType::u8, ValueType::i8, ValueType::u16, ValueType::i16, ValueType::f32})
     for (Codec c : {Codec::none, Codec::lz4, Codec::lz4hc})
       for (bool shuffle : {false, true})
         for (int apron : {0, 1, 2}) {
