@@ -342,8 +342,11 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
     return;
   }
   layout_ = manifest_.layout();
+  // Step 0's node table now, the others when first asked for: a scene of one step of a long
+  // series loads that step's table, not every one.
   nodes_.resize(size_t(manifest_.time_steps));
-  for (int step = 0; step < manifest_.time_steps; ++step) load_node_table(txn, step);
+  steps_loaded_ = std::make_unique<std::once_flag[]>(size_t(manifest_.time_steps));
+  std::call_once(steps_loaded_[0], [&] { load_node_table(txn, 0); });
   info.world = Box3d(manifest_.origin, manifest_.origin + manifest_.spacing * Vec3d(manifest_.dims - Vec3s(1)));
   info.unit_length = min_component(manifest_.spacing);
   std::optional<OctreeView> octree;
@@ -370,8 +373,12 @@ void Store::check_step(int step) const {
 }
 
 const Dataset& Store::dataset(int step) const {
-  check_step(step);
-  return kind() == DataKind::structured ? *datasets_[size_t(step)] : *datasets_.front();
+  if (kind() != DataKind::structured) {
+    check_step(step);
+    return *datasets_.front();
+  }
+  (void)nodes(step);  // its view points at the step's node table: loaded first
+  return *datasets_[size_t(step)];
 }
 
 const PageSource& Store::step_pages(int step) const {
@@ -382,10 +389,14 @@ const PageSource& Store::step_pages(int step) const {
 
 const NodeTable& Store::nodes(int step) const {
   check_step(step);
+  std::call_once(steps_loaded_[size_t(step)], [&] {
+    const lmdb::ReadTxn txn(*env_);
+    load_node_table(txn, step);
+  });
   return nodes_[size_t(step)];
 }
 
-void Store::load_node_table(const lmdb::ReadTxn& txn, int step) {
+void Store::load_node_table(const lmdb::ReadTxn& txn, int step) const {
   const std::string& dir = path_;
   NodeTable& table = nodes_[size_t(step)];
   table = NodeTable(layout_);

@@ -19,6 +19,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -87,6 +88,9 @@ class Store : public PageSource {
   const GridLayout& layout() const { return layout_; }
   const BrickFormat& format() const { return manifest_.format; }
   const NodeTable& nodes() const { return nodes_.front(); }
+  /// @brief Time step `step`'s node table, loaded on first use (thread-safe).
+  /// @throws Error(invalid_argument) for a step the store does not have; Error(corrupt) for a
+  /// damaged table, naming the chunk and the step.
   const NodeTable& nodes(int step) const;
   // Tetrahedral stores:
   const std::vector<TetCluster>& clusters() const { return clusters_; }
@@ -132,7 +136,7 @@ class Store : public PageSource {
  private:
   friend class OctreeWriter;
   // Each reads from `txn`, the constructor's one snapshot of the store (see Store::Store).
-  void load_node_table(const lmdb::ReadTxn& txn, int step);
+  void load_node_table(const lmdb::ReadTxn& txn, int step) const;
   void check_step(int step) const;
   void load_cluster_table(const lmdb::ReadTxn& txn);
   void load_octree_table(const lmdb::ReadTxn& txn);
@@ -143,7 +147,10 @@ class Store : public PageSource {
   lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_, octree_db_;
   Manifest manifest_;
   GridLayout layout_;
-  std::vector<NodeTable> nodes_;  ///< one per time step of a grid; sized at open, never after
+  /// One per time step of a grid, sized at open, never after; each filled once, under its
+  /// steps_loaded_ flag (step 0 at open, the others when first asked for), then read-only.
+  mutable std::vector<NodeTable> nodes_;
+  std::unique_ptr<std::once_flag[]> steps_loaded_;
   std::vector<TetCluster> clusters_;
   std::vector<TetStepRange> step_ranges_;
   std::vector<OctreePageRange> octree_pages_;

@@ -16,6 +16,7 @@
 #include "fields/grid.h"
 #include "preprocess/builder.h"
 #include "preprocess/volume_source.h"
+#include "storage/lmdb_env.h"
 #include "storage/store.h"
 #include "test_util.h"
 
@@ -107,6 +108,34 @@ TEST(TimeSeries, EachStepIsExactlyTheStoreOfItsVolumeAlone) {
       EXPECT_NE(std::string(e.what()).find("time step 3 of a dataset with 3 (0 to 2)"), std::string::npos) << e.what();
     }
   }
+}
+
+TEST(TimeSeries, AStepsNodeTableIsReadWhenThatStepIsFirstAskedForAndADamagedOneIsNamed) {
+  testing::TempDir dir;
+  BuildOptions o;
+  o.brick_size = 8;
+  Series series = field_series({20, 20, 20}, ValueType::u8);
+  build_series(series.steps, dir.file("s"), o);
+  {
+    // Step 2's first node-table chunk overwritten: [step 2][level 0][chunk 0], big-endian.
+    lmdb::Env env(dir.file("s"), {});
+    const auto db = env.open_database("nodes", false);
+    lmdb::BatchWriter w(env);
+    std::vector<std::byte> key(12, std::byte{0});
+    key[3] = std::byte{2};
+    w.put(db, key, std::vector<std::byte>(24, std::byte{0x5a}));
+    w.commit();
+  }
+  const Store store(dir.file("s"));  // opens: only step 0's table is read at open
+  EXPECT_NO_THROW((void)store.dataset(1));
+  try {
+    (void)store.dataset(2);
+    ADD_FAILURE() << "a damaged node table of step 2 was read";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), Errc::corrupt);
+    EXPECT_NE(std::string(e.what()).find("node table chunk 0 of level 0 of time step 2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW((void)store.nodes(2), Error) << "asked again, it fails again";
 }
 
 TEST(TimeSeries, AOneStepStoreIsWrittenAsBefore) {
