@@ -345,8 +345,9 @@ Store::Store(const std::string& dir, OpenOptions options) : path_(dir) {
   // Step 0's node table now, the others when first asked for: a scene of one step of a long
   // series loads that step's table, not every one.
   nodes_.resize(size_t(manifest_.time_steps));
-  steps_loaded_ = std::make_unique<std::once_flag[]>(size_t(manifest_.time_steps));
-  std::call_once(steps_loaded_[0], [&] { load_node_table(txn, 0); });
+  steps_loaded_ = std::make_unique<std::atomic<bool>[]>(size_t(manifest_.time_steps));
+  load_node_table(txn, 0);
+  steps_loaded_[0].store(true, std::memory_order_release);
   info.world = Box3d(manifest_.origin, manifest_.origin + manifest_.spacing * Vec3d(manifest_.dims - Vec3s(1)));
   info.unit_length = min_component(manifest_.spacing);
   std::optional<OctreeView> octree;
@@ -389,10 +390,17 @@ const PageSource& Store::step_pages(int step) const {
 
 const NodeTable& Store::nodes(int step) const {
   check_step(step);
-  std::call_once(steps_loaded_[size_t(step)], [&] {
-    const lmdb::ReadTxn txn(*env_);
-    load_node_table(txn, step);
-  });
+  // Not std::call_once: a load that throws (a damaged table) must leave the step unloaded for
+  // the next call, and libstdc++'s call_once over pthread_once does not survive an exception
+  // everywhere (under TSan the next call waits forever).
+  if (!steps_loaded_[size_t(step)].load(std::memory_order_acquire)) {
+    const std::lock_guard lock(steps_mutex_);
+    if (!steps_loaded_[size_t(step)].load(std::memory_order_relaxed)) {
+      const lmdb::ReadTxn txn(*env_);
+      load_node_table(txn, step);
+      steps_loaded_[size_t(step)].store(true, std::memory_order_release);
+    }
+  }
   return nodes_[size_t(step)];
 }
 

@@ -19,6 +19,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <atomic>
 #include <mutex>
 #include <optional>
 #include <span>
@@ -147,10 +148,12 @@ class Store : public PageSource {
   lmdb::Database manifest_db_, nodes_db_, bricks_db_, clusters_db_, tets_db_, octree_db_;
   Manifest manifest_;
   GridLayout layout_;
-  /// One per time step of a grid, sized at open, never after; each filled once, under its
-  /// steps_loaded_ flag (step 0 at open, the others when first asked for), then read-only.
+  /// One per time step of a grid, sized at open, never after; each filled once under
+  /// steps_mutex_ (step 0 at open, the others when first asked for), then read-only: its
+  /// steps_loaded_ flag, set after, is what readers check.
   mutable std::vector<NodeTable> nodes_;
-  std::unique_ptr<std::once_flag[]> steps_loaded_;
+  std::unique_ptr<std::atomic<bool>[]> steps_loaded_;
+  mutable std::mutex steps_mutex_;
   std::vector<TetCluster> clusters_;
   std::vector<TetStepRange> step_ranges_;
   std::vector<OctreePageRange> octree_pages_;
