@@ -523,49 +523,50 @@ int run_verify(const std::string& path) {
   // Step 2: every node: flags, and for stored bricks a full decode with checksum and ranges.
   Progress progress("verify", uint64_t(l.total_bricks()) * uint64_t(steps), "bricks");
   std::atomic<int64_t> decoded{0};
-  for (step = 0; step < steps; ++step)
-  for (int level = 0; level < l.levels; ++level) {
-    const int64_t n = l.brick_count(level);
-    parallel_for<int64_t>(0, n, 16, [&](int64_t i0, int64_t i1) {
-      auto txn = store.begin_read();
-      std::vector<std::byte> buffer(f.bytes());
-      for (int64_t i = i0; i < i1; ++i) {
-        const BrickKey k = l.key_at(level, i);
-        const NodeRecord& node = store.nodes(step).at(k);
-        const bool finest = level == l.finest();
-        if (bool(node.flags & kNodeFinest) != finest || bool(node.flags & kNodeHasChildren) == finest)
-          report(k, fmt::format("node flags 0x{:x} do not match level {}", node.flags, level));
-        if (!(node.min <= node.max)) report(k, fmt::format("node range [{}, {}] is inverted", node.min, node.max));
-        if (node.is_constant()) {
-          if (store.record(txn, k, step)) report(k, "constant node has a record");
-          if (node.constant < node.min || node.constant > node.max)
-            report(k, fmt::format("constant {} outside the node range [{}, {}]", node.constant, node.min, node.max));
-          continue;
+  for (step = 0; step < steps; ++step) {
+    for (int level = 0; level < l.levels; ++level) {
+      const int64_t n = l.brick_count(level);
+      parallel_for<int64_t>(0, n, 16, [&](int64_t i0, int64_t i1) {
+        auto txn = store.begin_read();
+        std::vector<std::byte> buffer(f.bytes());
+        for (int64_t i = i0; i < i1; ++i) {
+          const BrickKey k = l.key_at(level, i);
+          const NodeRecord& node = store.nodes(step).at(k);
+          const bool finest = level == l.finest();
+          if (bool(node.flags & kNodeFinest) != finest || bool(node.flags & kNodeHasChildren) == finest)
+            report(k, fmt::format("node flags 0x{:x} do not match level {}", node.flags, level));
+          if (!(node.min <= node.max)) report(k, fmt::format("node range [{}, {}] is inverted", node.min, node.max));
+          if (node.is_constant()) {
+            if (store.record(txn, k, step)) report(k, "constant node has a record");
+            if (node.constant < node.min || node.constant > node.max)
+              report(k, fmt::format("constant {} outside the node range [{}, {}]", node.constant, node.min, node.max));
+            continue;
+          }
+          auto rec = store.record(txn, k, step);
+          if (!rec) {
+            report(k, "record missing");
+            continue;
+          }
+          try {
+            decode_brick(f, k, *rec, buffer);
+            const BrickHeader h = read_brick_header(*rec, k);
+            dispatch_value_type(f.type, [&](auto tag) {
+              using T = decltype(tag);
+              const T* v = reinterpret_cast<const T*>(buffer.data());
+              const auto [mn, mx] = std::minmax_element(v, v + f.voxels());
+              if (float(*mn) != h.min || float(*mx) != h.max)
+                report(k, fmt::format("header range [{}, {}] but the voxels span [{}, {}]", h.min, h.max, double(*mn), double(*mx)));
+              if (node.min < float(*mn) || node.max > float(*mx))
+                report(k, fmt::format("node range [{}, {}] is not inside the brick's [{}, {}]", node.min, node.max, double(*mn), double(*mx)));
+            });
+            decoded.fetch_add(1, std::memory_order_relaxed);
+          } catch (const Error& e) {
+            report(k, e.message());
+          }
         }
-        auto rec = store.record(txn, k, step);
-        if (!rec) {
-          report(k, "record missing");
-          continue;
-        }
-        try {
-          decode_brick(f, k, *rec, buffer);
-          const BrickHeader h = read_brick_header(*rec, k);
-          dispatch_value_type(f.type, [&](auto tag) {
-            using T = decltype(tag);
-            const T* v = reinterpret_cast<const T*>(buffer.data());
-            const auto [mn, mx] = std::minmax_element(v, v + f.voxels());
-            if (float(*mn) != h.min || float(*mx) != h.max)
-              report(k, fmt::format("header range [{}, {}] but the voxels span [{}, {}]", h.min, h.max, double(*mn), double(*mx)));
-            if (node.min < float(*mn) || node.max > float(*mx))
-              report(k, fmt::format("node range [{}, {}] is not inside the brick's [{}, {}]", node.min, node.max, double(*mn), double(*mx)));
-          });
-          decoded.fetch_add(1, std::memory_order_relaxed);
-        } catch (const Error& e) {
-          report(k, e.message());
-        }
-      }
-      progress.advance(uint64_t(i1 - i0));
-    });
+        progress.advance(uint64_t(i1 - i0));
+      });
+    }
   }
   progress.finish();
   std::sort(bad.begin(), bad.end(), [](const auto& a, const auto& b) {

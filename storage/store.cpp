@@ -102,16 +102,9 @@ std::array<std::byte, 8> brick_key_bytes(const BrickKey& key) {
   return out;
 }
 
-/// A record or node-table key of a grid of several time steps: the step (big-endian) before the
-/// single-step key, so that each step's records are contiguous and in the same order.
-std::array<std::byte, 12> step_key(uint32_t step, const std::array<std::byte, 8>& key) {
-  std::array<std::byte, 12> out;
-  for (int i = 0; i < 4; ++i) out[size_t(i)] = std::byte((step >> (24 - 8 * i)) & 0xff);
-  std::memcpy(out.data() + 4, key.data(), 8);
-  return out;
-}
-
-/// A key of either width, as LMDB takes it.
+/// A record or node-table key as LMDB takes it: the one-step key (8 bytes), or in a grid of
+/// several time steps the step (big-endian u32) before it, so that each step's records are
+/// contiguous and in the same order.
 struct KeyBytes {
   std::array<std::byte, 12> bytes{};
   size_t size = 8;
@@ -119,11 +112,10 @@ struct KeyBytes {
 };
 KeyBytes keyed(bool series, int step, const std::array<std::byte, 8>& key) {
   KeyBytes k;
-  if (series) {
-    k.bytes = step_key(uint32_t(step), key), k.size = 12;
-  } else {
-    std::memcpy(k.bytes.data(), key.data(), 8);
-  }
+  const size_t at = series ? 4 : 0;
+  for (size_t i = 0; i < at; ++i) k.bytes[i] = std::byte((uint32_t(step) >> (24 - 8 * i)) & 0xff);
+  std::memcpy(k.bytes.data() + at, key.data(), 8);
+  k.size = at + 8;
   return k;
 }
 

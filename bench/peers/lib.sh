@@ -1,5 +1,6 @@
 # bench/peers/lib.sh: what the peers drivers share (peers.sh for grids, tets.sh for tetrahedral
-# meshes, dvr.sh for volume rendering): argument checks, the brickyard executable and its back ends, the Debian packages, and
+# meshes, dvr.sh for volume rendering, vdb.sh for level sets): argument checks, the brickyard
+# executable and its back ends, the Debian packages, and
 # embree_frame compiled into build-peers/. Sourced, not run: the driver sets `me` (the prefix
 # of its messages), `here` (bench/peers) and `root` (the repository) first.
 
@@ -108,7 +109,7 @@ run_brickyard() {
   t1=$(date +%s%N)
 }
 
-# shared_option OPT VALUE: checks and sets the options both drivers take (the caller has
+# shared_option OPT VALUE: checks and sets the options the drivers share (the caller has
 # taken OPT's VALUE; the driver's own options come first in its case).
 shared_option() {
   local opt="$1" val="$2"

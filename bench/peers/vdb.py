@@ -29,19 +29,12 @@ import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from dvr import PinholeCamera, camera_in_box  # noqa: E402  (brickyard's camera, mirrored)
+import peers as common  # noqa: E402  (bench/peers/peers.py: fail, world_box)
 
-ME = "peers-vdb"
-
-
-def fail(message, code=1):
-    print(f"{ME}: {message}", file=sys.stderr)
-    sys.exit(code)
-
-
-def world_box(manifest):
-    lo = [float(o) for o in manifest["origin"]]
-    hi = [lo[a] + float(manifest["spacing"][a]) * (int(manifest["dims"][a]) - 1) for a in range(3)]
-    return lo, hi
+common.ME = "peers-vdb"
+ME = common.ME
+fail = common.fail
+world_box = common.world_box  # of a manifest, as of a sidecar: both have dims, spacing, origin
 
 
 def vec3(text, what):

@@ -55,17 +55,10 @@ while [ $# -gt 0 ]; do
   case "$opt" in
     --vdb) [ -f "$val" ] || die "--vdb: $val: no such file"; vdb="$val" ;;
     --size) { is_int "$val" && [ "$val" -ge 8 ] && [ "$val" -le 4096 ]; } || die "--size: '$val' is not an integer in [8, 4096]"; size="$val" ;;
-    --width | --height)
-      { is_int "$val" && [ "$val" -ge 1 ] && [ "$val" -le 8192 ]; } || die "$opt: '$val' is not an integer in [1, 8192]"
-      [ "$opt" = --width ] && width="$val" || height="$val"
-      ;;
-    --eye | --target | --up) is_vec3 "$val" || die "$opt: '$val' is not X,Y,Z"; printf -v "${opt#--}" '%s' "$val" ;;
     --fov) { is_number "$val" && awk -v f="$val" 'BEGIN { exit !(f > 0 && f < 179) }'; } || die "--fov: '$val' is not an angle in (0, 179)"; fov="$val" ;;
-    --threads) { is_int "$val" && [ "$val" -ge 1 ]; } || die "--threads: '$val' is not an integer"; threads="$val" ;;
     --frames) { is_int "$val" && [ "$val" -ge 2 ]; } || die "--frames: '$val' is not an integer of at least 2"; frames="$val" ;;
     --backends) [[ "$val" =~ ^[A-Za-z0-9_.,-]+$ ]] || die "--backends: '$val' is not a list of back ends"; backends="$val" ;;
-    --brickyard) brickyard="$val" ;;
-    --out) [ -n "$val" ] || die "--out: an empty path"; out="$val" ;;
+    *) shared_option "$opt" "$val" ;;  # --width --height --eye --target --up --threads --brickyard --out
   esac
 done
 
