@@ -171,20 +171,20 @@ Manifest Manifest::from_json(const std::string& text, const std::string& path) {
                                             kTimeSeriesGridFormatVersion, m.format_version))
           .with_file(path)
           .with_field("format_version");
-    // Written with the final manifest: an interrupted build's has none yet.
-    const auto ranges = m.complete || j.contains("step_value_ranges")
-                            ? r.get<std::vector<std::vector<double>>>("step_value_ranges")
-                            : std::vector<std::vector<double>>(size_t(m.time_steps), std::vector<double>{0.0, 0.0});
-    if (ranges.size() != size_t(m.time_steps))
-      throw Error(Errc::format, fmt::format("{} ranges for {} time steps", ranges.size(), m.time_steps))
-          .with_file(path)
-          .with_field("step_value_ranges");
-    for (size_t i = 0; i < ranges.size(); ++i) {
-      if (ranges[i].size() != 2 || !(ranges[i][0] <= ranges[i][1]))
-        throw Error(Errc::format, fmt::format("step {}: expected [min, max] with min <= max", i))
+    // Written with the final manifest: an interrupted build's has none yet, and gets none.
+    if (m.complete || j.contains("step_value_ranges")) {
+      const auto ranges = r.get<std::vector<std::vector<double>>>("step_value_ranges");
+      if (ranges.size() != size_t(m.time_steps))
+        throw Error(Errc::format, fmt::format("{} ranges for {} time steps", ranges.size(), m.time_steps))
             .with_file(path)
             .with_field("step_value_ranges");
-      m.step_ranges.push_back({ranges[i][0], ranges[i][1]});
+      for (size_t i = 0; i < ranges.size(); ++i) {
+        if (ranges[i].size() != 2 || !(ranges[i][0] <= ranges[i][1]))
+          throw Error(Errc::format, fmt::format("step {}: expected [min, max] with min <= max", i))
+              .with_file(path)
+              .with_field("step_value_ranges");
+        m.step_ranges.push_back({ranges[i][0], ranges[i][1]});
+      }
     }
   }
   m.dims = r.vec3<int64_t>("dims");

@@ -263,6 +263,8 @@ TEST(Resume, ASeriesKilledInALaterStepResumesThereWithoutReadingTheStepsBefore) 
     for (auto& p : first) steps.push_back(p.get());
     EXPECT_THROW(build_series(steps, s, o), Error);
     EXPECT_EQ(probe_store(s), StoreState::incomplete);
+    EXPECT_TRUE(read_manifest(s).step_ranges.empty()) << "an interrupted series has no ranges yet; none are invented";
+    EXPECT_EQ(read_manifest(s).to_json().find("step_value_ranges"), std::string::npos);
     steps.clear();
     for (int k = 0; k < 3; ++k) second.push_back(std::make_unique<Interrupted>(fields[k], dims, ValueType::u16, never)), steps.push_back(second.back().get());
     const BuildResult r = build_series(steps, s, o);
