@@ -174,7 +174,7 @@ class GigaVoxelsRenderer final : public Renderer {
   void set_complete_frames(bool complete) override { complete_frames_ = complete; }
 
   const NodeTree& tree() const { return tree_; }
-  const Voxel* brick(uint32_t slot) const { return pool_.data() + size_t(slot) * tree_.brick_values(); }
+  const Voxel* brick(uint32_t slot) const { return pool_.get() + size_t(slot) * tree_.brick_values(); }
   const uint8_t* group_distances(uint32_t slot) const { return group_distances_.data() + size_t(slot) * group_count_; }
   const BrickDifferences& brick_differences_of(uint32_t slot) const {
     assert(slot < brick_differences_.size());  // kept only where keeps_differences()
@@ -230,7 +230,9 @@ class GigaVoxelsRenderer final : public Renderer {
   ShadingModel shading_;
   std::unique_ptr<Source> source_;
   NodeTree tree_;
-  std::vector<Voxel> pool_;  // the brick pool's voxels, brick_capacity() x (M + 2)^3
+  // The brick pool's voxels, brick_capacity() x (M + 2)^3, not zeroed: a slot is written whole
+  // before any ray reads it, and only the slots a dataset fills are committed.
+  std::unique_ptr<Voxel[]> pool_;
   std::optional<float> outside_value_;  // the value outside the volume, where it is defined
   std::vector<Scale> scales_;  // N^depth
   std::vector<double> inv_scales_;  // 1 / N^depth, rounded
