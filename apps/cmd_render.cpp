@@ -342,7 +342,17 @@ ColdRun cold_run(RenderSession& session, const FrameSetup& setup, const FrameBuf
   return run;
 }
 
-/// Times `cold` runs from empty caches (cold_run()) and `warm` frames on warmed caches;
+/// From empty caches to a still camera's converged image, asked for at once (no frame shown
+/// before it, as `brickyard render` asks): its wall time and frames.
+std::pair<double, int> still_run(RenderSession& session, const FrameSetup& setup, FrameBuffers& scratch) {
+  session.reset_cache();
+  Stopwatch wall;
+  const int frames = session.complete(setup, scratch);
+  return {wall.seconds(), frames};
+}
+
+/// Times `cold` runs from empty caches (cold_run()), as many still ones (still_run()), and
+/// `warm` frames on warmed caches;
 /// returns the row and the last warm frame. `truth` (null for the reference itself) gives the
 /// first frames' error.
 BenchRow measure(RenderSession& session, int frame, int cold, int warm, const FrameOutputs& outputs, FrameBuffers& last,
@@ -359,6 +369,12 @@ BenchRow measure(RenderSession& session, int frame, int cold, int warm, const Fr
     first_rmse.push_back(run.first_error.rmse);
     first_ssim.push_back(run.first_error.ssim);
   }
+  std::vector<double> still_s, still_frames;
+  for (int i = 0; i < cold; ++i) {
+    const auto [seconds, n] = still_run(session, setup, last);
+    still_s.push_back(seconds);
+    still_frames.push_back(n);
+  }
   // Warm: the cache filled and the back end converged (asynchronous back ends refine over
   // frames as their data arrives).
   row.settle_frames = session.settle(frame, outputs, RenderSession::kMaxSettleFrames, RenderSession::Settle::complete);
@@ -373,6 +389,8 @@ BenchRow measure(RenderSession& session, int frame, int cold, int warm, const Fr
   if (cold > 0) {
     row.converged_median_s = median_of(converged_s);
     row.converged_frames = int(std::lround(median_of(frames)));
+    row.still_median_s = median_of(still_s);
+    row.still_frames = int(std::lround(median_of(still_frames)));
     if (truth) row.first_rmse = median_of(first_rmse), row.first_ssim = median_of(first_ssim);
   }
   row.warm_median_s = median_of(warm_s);
@@ -557,11 +575,13 @@ void run_bench(const BenchOptions& o) {
       row.error = compare_frames(fb, truth, voxel_size);
       row.image = fmt::format("images/{}-{}.png", safe_name(name), safe_name(row.quality));
       write_png((fs::path(o.out) / row.image).string(), to_rgba8(fb.color));
-      std::cout << fmt::format("  {:<10} {:<10} {:>10} first (RMSE {:.3g}) {:>10} converged ({} frames) {:>10} warm  RMSE "
-                               "{:.4g}  SSIM {:.4f}  {} rays/s/core\n",
-                               name, row.quality, row.cold_runs > 0 ? format_duration(row.cold_median_s) : "-",
-                               row.first_rmse, row.cold_runs > 0 ? format_duration(row.converged_median_s) : "-",
-                               row.converged_frames, format_duration(row.warm_median_s), row.error.rmse, row.error.ssim,
+      const bool cold = row.cold_runs > 0;
+      std::cout << fmt::format("  {:<10} {:<10} {:>10} first (RMSE {:.3g}) {:>10} converged ({} frames) {:>10} still ({} "
+                               "frames) {:>10} warm  RMSE {:.4g}  SSIM {:.4f}  {} rays/s/core\n",
+                               name, row.quality, cold ? format_duration(row.cold_median_s) : "-", row.first_rmse,
+                               cold ? format_duration(row.converged_median_s) : "-", row.converged_frames,
+                               cold ? format_duration(row.still_median_s) : "-", row.still_frames,
+                               format_duration(row.warm_median_s), row.error.rmse, row.error.ssim,
                                format_count(row.rays_per_second_per_core));
       report.rows.push_back(row);
     }

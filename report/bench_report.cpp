@@ -116,7 +116,7 @@ std::string csv_text(const BenchReport& report, const std::vector<bool>& on_fron
       "cold_runs,warm_runs,settle_frames,is_reference,pareto,rays_per_second_per_core,samples,bricks,bytes_read,rmse,psnr_db,ssim,"
       "depth_mean,depth_p99,depth_max,normal_mean_deg,normal_p99_deg,depth_pixels,normal_pixels,coverage_mismatch,"
       "coverage_mismatch_fraction,nonfinite_color_pixels,first_rmse,first_ssim,converged_median_s,converged_frames,"
-      "is_peer,peak_rss_bytes,description,image\n";
+      "still_median_s,still_frames,is_peer,peak_rss_bytes,description,image\n";
   for (size_t i = 0; i < report.rows.size(); ++i) {
     const BenchRow& r = report.rows[i];
     const ImageError& e = r.error;
@@ -130,8 +130,9 @@ std::string csv_text(const BenchReport& report, const std::vector<bool>& on_fron
                        csv_number(e.normal_mean_deg), csv_number(e.normal_p99_deg), e.depth_pixels, e.normal_pixels,
                        e.coverage_mismatch, csv_number(e.coverage_mismatch_fraction), e.nonfinite_color_pixels);
     // The image stays last, where it always was; it is never empty for rendered rows.
-    out += fmt::format("{},{},{},{},{},{},{},{}\n", csv_number(r.first_rmse), csv_number(r.first_ssim),
-                       csv_number(r.converged_median_s), r.converged_frames, int(r.is_peer), r.peak_rss_bytes,
+    out += fmt::format("{},{},{},{},{},{},{},{},{},{}\n", csv_number(r.first_rmse), csv_number(r.first_ssim),
+                       csv_number(r.converged_median_s), r.converged_frames, csv_number(r.still_median_s),
+                       r.still_frames, int(r.is_peer), r.peak_rss_bytes,
                        csv_field(r.description), csv_field(r.image));
   }
   return out;
@@ -322,8 +323,8 @@ std::string equal_error_markdown(const std::vector<EqualErrorRow>& rows, BenchTi
             "front; ≤ where its fastest row is already more accurate (that row's time), ≥ where none is that accurate "
             "(its most accurate row's time). Speed-up: the other's time over this one's (above 1: faster).\n\n"
           : "## At equal error: from empty caches to the converged image\n\n"
-            "The same comparison with the time from empty caches to the converged image (for a peer, its first "
-            "frame) in place of the warm frame's.\n\n";
+            "The same comparison with the time from empty caches to a still camera's converged image (Still; "
+            "Converged where Still was not measured; for a peer, its first frame) in place of the warm frame's.\n\n";
   s += "| Backend | Against | At RMSE of | RMSE | Against ms | Backend ms | Speed-up |\n"
        "|---|---|---|--:|--:|--:|--:|\n";
   for (const EqualErrorRow& e : rows) {
@@ -350,10 +351,10 @@ std::string markdown_text(const std::string& dir, const BenchReport& report, con
   }
   if (!written.error_plot.empty()) s += "![Colour RMSE against warm frame time](error-vs-time.png)\n\n";
 
-  s += "| Backend | Quality | First frame ms | First RMSE | Converged ms | Frames | Warm median ms | Warm p95 ms "
-       "| Rays/s/core | Read/frame | RMSE | PSNR dB | SSIM | Depth mean vox | Depth p99 vox | Normal mean ° "
-       "| Coverage mismatch % | Pareto | Image |\n";
-  s += "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|:-:|---|\n";
+  s += "| Backend | Quality | First frame ms | First RMSE | Converged ms | Frames | Still ms | Still frames "
+       "| Warm median ms | Warm p95 ms | Rays/s/core | Read/frame | RMSE | PSNR dB | SSIM | Depth mean vox "
+       "| Depth p99 vox | Normal mean ° | Coverage mismatch % | Pareto | Image |\n";
+  s += "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|:-:|---|\n";
   std::vector<std::string> nonfinite;
   for (size_t i = 0; i < rows.size(); ++i) {
     const BenchRow& r = rows[i];
@@ -373,11 +374,13 @@ std::string markdown_text(const std::string& dir, const BenchReport& report, con
       if (e.nonfinite_color_pixels) nonfinite.push_back(fmt::format("{} ({})", row_label(r), e.nonfinite_color_pixels));
     }
     const bool cold = r.cold_runs > 0;
-    s += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", md_cell(r.backend),
+    s += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", md_cell(r.backend),
                      md_cell(r.quality), cold ? ms(r.cold_median_s) : "—",
                      cold && std::isfinite(r.first_rmse) ? fmt::format("{:.4g}", r.first_rmse) : "—",
                      std::isfinite(r.converged_median_s) ? ms(r.converged_median_s) : "—",
-                     std::isfinite(r.converged_median_s) ? std::to_string(r.converged_frames) : "—", ms(r.warm_median_s),
+                     std::isfinite(r.converged_median_s) ? std::to_string(r.converged_frames) : "—",
+                     std::isfinite(r.still_median_s) ? ms(r.still_median_s) : "—",
+                     std::isfinite(r.still_median_s) ? std::to_string(r.still_frames) : "—", ms(r.warm_median_s),
                      ms(r.warm_p95_s), r.is_peer ? "—" : format_count(r.rays_per_second_per_core),
                      r.is_peer ? "—" : format_bytes(double(r.bytes_read)), errors, on_front[i] ? "★" : "", image);
   }
@@ -401,8 +404,10 @@ std::string markdown_text(const std::string& dir, const BenchReport& report, con
        "- **First frame**: the first frame from empty caches, and its RMSE: a back end that refines as its data "
        "arrives shows a coarse or incomplete image first. **Converged**: the wall time from empty caches to the "
        "converged image, the frames rendered one after another as they would be shown, each followed by the loads "
-       "it asked for; **Frames**: how many that took. **Warm**: the same frame again with the caches filled and "
-       "the image converged. Medians (and 95th percentile) over the runs; a peer's times are its first frame and "
+       "it asked for; **Frames**: how many that took. **Still**: the same wait for a still camera's image asked "
+       "for at once (`brickyard render`): no frame before it is shown, so a back end may complete each one where "
+       "it would refine it over frames shown; **Still frames**: how many that took. **Warm**: the same frame "
+       "again with the caches filled and the image converged. Medians (and 95th percentile) over the runs; a peer's times are its first frame and "
        "its steady frames.\n"
        "- **Rays/s/core**: primary rays per second per thread on a warm frame; **Read/frame**: bytes read from "
        "the store during a warm frame.\n"
@@ -442,7 +447,8 @@ std::vector<size_t> pareto_front(const std::vector<BenchRow>& rows) {
 }
 
 double time_of(const BenchRow& r, BenchTime which) {
-  return which == BenchTime::warm ? r.warm_median_s : r.converged_median_s;
+  if (which == BenchTime::warm) return r.warm_median_s;
+  return std::isfinite(r.still_median_s) ? r.still_median_s : r.converged_median_s;
 }
 
 std::vector<EqualErrorRow> equal_error_rows(const std::vector<BenchRow>& rows, BenchTime which) {

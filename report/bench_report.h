@@ -37,6 +37,12 @@ struct BenchRow {
   /// frame is already complete).
   double converged_median_s = std::numeric_limits<double>::quiet_NaN();
   int converged_frames = 0;
+  /// From empty caches to a still camera's converged image asked for at once, the wait of
+  /// `brickyard render` (or a viewer whose camera stops): no frame before it is shown, so a
+  /// back end may complete each one (RenderSession::complete); the frames that took. For a peer,
+  /// its first frame. NaN when there were no cold runs.
+  double still_median_s = std::numeric_limits<double>::quiet_NaN();
+  int still_frames = 0;
   int settle_frames = 0;        ///< warm-up frames before the warm ones, completed at once where the back end can (RenderSession::Settle::complete)
   ImageError error;             ///< of the warm frame, against the reference frame
   /// The first cold frame's RMSE and SSIM against the reference (NaN when there was no cold run).
@@ -60,7 +66,7 @@ struct BenchReport {
 /// @brief Which time of a row equal_error_rows() compares.
 enum class BenchTime {
   warm,       ///< warm_median_s: the steady frame
-  converged,  ///< converged_median_s: from empty caches to the converged image
+  converged,  ///< from empty caches to the converged image: still_median_s where measured, else converged_median_s
 };
 double time_of(const BenchRow& r, BenchTime which);
 

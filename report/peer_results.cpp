@@ -99,6 +99,8 @@ BenchRow peer_row(const PeerResult& peer, const FrameBuffers& truth, double voxe
   row.cold_runs = 1;
   row.converged_median_s = peer.first_frame_s;
   row.converged_frames = 1;
+  row.still_median_s = peer.first_frame_s;
+  row.still_frames = 1;
   row.warm_median_s = median(peer.steady_s);
   std::vector<double> steady = peer.steady_s;
   row.warm_p95_s = percentile(steady, 95);

@@ -165,23 +165,31 @@ int RenderSession::settle(int frame, const FrameOutputs& outputs, int max_frames
 }
 
 int RenderSession::settle(const FrameSetup& frame_setup, int max_frames, Settle how) {
-  follow_step(frame_setup.time_step);  // before the guard below holds the back end
-  struct CompleteFrames {  // off again however settle() ends
-    Renderer& renderer;
-    explicit CompleteFrames(Renderer& r, bool on) : renderer(r) { renderer.set_complete_frames(on); }
-    ~CompleteFrames() { renderer.set_complete_frames(false); }
-  } complete(*renderer_, how == Settle::complete);
   FrameBuffers scratch;
-  bool completing = how == Settle::complete;
-  for (int n = 1; n <= max_frames; ++n) {
+  int n = 0;
+  // A complete frame also converges when a pass could not be served (passes exhausted, a pool
+  // too small); the frames shown next are not completed: settle until they converge too.
+  if (how == Settle::complete) n = complete(frame_setup, scratch, max_frames);
+  while (n < max_frames) {
     render(frame_setup, scratch);
+    ++n;
     pages_->wait_idle();  // the loader serves this frame's requests before the next one
-    if (!renderer_->converged()) continue;
-    if (!completing) return n;
-    // A complete frame also converges when a pass could not be served (passes exhausted, a
-    // pool too small); the frames shown next are not completed: settle until they converge too.
-    completing = false;
-    renderer_->set_complete_frames(false);
+    if (renderer_->converged()) return n;
+  }
+  return max_frames;
+}
+
+int RenderSession::complete(const FrameSetup& frame_setup, FrameBuffers& out, int max_frames) {
+  follow_step(frame_setup.time_step);  // before the guard below holds the back end
+  struct CompleteFrames {  // off again however this ends
+    Renderer& renderer;
+    explicit CompleteFrames(Renderer& r) : renderer(r) { renderer.set_complete_frames(true); }
+    ~CompleteFrames() { renderer.set_complete_frames(false); }
+  } guard(*renderer_);
+  for (int n = 1; n <= max_frames; ++n) {
+    render(frame_setup, out);
+    pages_->wait_idle();
+    if (renderer_->converged()) return n;
   }
   return max_frames;
 }

@@ -83,6 +83,10 @@ class RenderSession {
   /// then not the frames a viewer would see converge.
   int settle(int frame, const FrameOutputs& outputs, int max_frames = kMaxSettleFrames, Settle how = Settle::refine);
   int settle(const FrameSetup& setup, int max_frames = kMaxSettleFrames, Settle how = Settle::refine);
+  /// @brief Renders complete frames (none is shown: Renderer::set_complete_frames), letting the
+  /// loader serve each one's requests, until one converges (at most max_frames); `out` holds
+  /// the last. Returns the frames it took: the wait for a still camera's converged image.
+  int complete(const FrameSetup& setup, FrameBuffers& out, int max_frames = kMaxSettleFrames);
 
  private:
   void build_cache();

@@ -298,10 +298,17 @@ TEST_F(CliRender, BenchReportsFirstFrameConvergenceAndPeersBesideTheBackEnds) {
   EXPECT_GT(std::stoi(cell(3, "converged_frames")), 1);  // refines from empty caches
   EXPECT_GE(std::stod(cell(3, "converged_median_s")), std::stod(cell(3, "cold_median_s")));
   EXPECT_GT(std::stod(cell(3, "first_rmse")), std::stod(cell(3, "rmse")));  // the first image is coarser
+  // A still camera's image asked for at once: raymarch's first frame; gigavoxels completes its
+  // first frame where the frames shown refine over several.
+  EXPECT_EQ(cell(2, "still_frames"), "1");
+  EXPECT_GT(std::stod(cell(2, "still_median_s")), 0);
+  EXPECT_EQ(cell(3, "still_frames"), "1");
+  EXPECT_GT(std::stod(cell(3, "still_median_s")), 0);
   EXPECT_EQ(cell(4, "backend"), "flat");
   EXPECT_EQ(cell(4, "is_peer"), "1");
   EXPECT_EQ(cell(4, "warm_median_s"), "0.25");
   EXPECT_EQ(cell(4, "converged_median_s"), "0.5");
+  EXPECT_EQ(cell(4, "still_median_s"), "0.5");  // a peer's first frame is its finished image
   EXPECT_GT(std::stod(cell(4, "rmse")), 0.01);
   EXPECT_TRUE(fs::exists(report + "/images/peer-flat-q_1.png"));
   const std::string md = testing::read_file(report + "/bench.md");

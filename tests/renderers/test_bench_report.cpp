@@ -287,7 +287,7 @@ TEST(BenchReport, CsvHasEveryColumnOnEveryLineAndQuotesLabels) {
   const auto records = parse_csv(testing::read_file(dir.file("out/bench.csv")));
   ASSERT_EQ(records.size(), report.rows.size() + 1);
   const size_t columns = records[0].size();
-  EXPECT_EQ(columns, 40u);
+  EXPECT_EQ(columns, 42u);
   for (const auto& r : records) EXPECT_EQ(r.size(), columns);
   auto column = [&](const std::string& name) {
     return size_t(std::find(records[0].begin(), records[0].end(), name) - records[0].begin());
@@ -510,6 +510,14 @@ TEST(BenchReport, ComparesTimesFromEmptyCachesToTheConvergedImage) {
   EXPECT_DOUBLE_EQ(cold[0].backend_time_s, 0.300);
   EXPECT_DOUBLE_EQ(cold[0].speedup(), 0.040 / 0.300);
   EXPECT_EQ(cold[0].time, BenchTime::converged);
+  // Where a still camera's wait was measured, that is the time compared: "lod" completes its
+  // first frame in 0.06 s where the frames shown take 0.3.
+  rows[0].still_median_s = 0.060, rows[0].still_frames = 1;
+  const std::vector<EqualErrorRow> still = equal_error_rows(rows, BenchTime::converged);
+  ASSERT_EQ(still.size(), 2u);
+  EXPECT_DOUBLE_EQ(still[0].backend_time_s, 0.060);
+  EXPECT_DOUBLE_EQ(still[0].speedup(), 0.040 / 0.060);
+  rows[0].still_median_s = std::numeric_limits<double>::quiet_NaN();
   // A row without cold runs (NaN) takes no part in the converged comparison.
   rows[1].converged_median_s = std::numeric_limits<double>::quiet_NaN();
   EXPECT_TRUE(equal_error_rows(rows, BenchTime::converged).empty());
@@ -522,6 +530,7 @@ TEST(BenchReport, WritesFirstFrameConvergedAndPeerColumns) {
   report.rows[1].cold_runs = 3, report.rows[1].cold_median_s = 0.004;
   report.rows[1].first_rmse = 0.21, report.rows[1].first_ssim = 0.5;
   report.rows[1].converged_median_s = 0.25, report.rows[1].converged_frames = 7;
+  report.rows[1].still_median_s = 0.1, report.rows[1].still_frames = 2;
   report.rows[2].converged_median_s = 0.03, report.rows[2].converged_frames = 1;
   BenchRow peer = row("vtk-fixed-point", "sample=1", 1, 0.15, 0.03);
   peer.is_peer = true, peer.description = "VTK 9.1 vtkFixedPointVolumeRayCastMapper, 2 threads";
@@ -543,6 +552,9 @@ TEST(BenchReport, WritesFirstFrameConvergedAndPeerColumns) {
   EXPECT_EQ(records[2][column("first_rmse")], "0.21");
   EXPECT_EQ(records[2][column("converged_median_s")], "0.25");
   EXPECT_EQ(records[2][column("converged_frames")], "7");
+  EXPECT_EQ(records[2][column("still_median_s")], "0.1");
+  EXPECT_EQ(records[2][column("still_frames")], "2");
+  EXPECT_EQ(records[4][column("still_median_s")], "nan");
   EXPECT_EQ(records[2][column("is_peer")], "0");
   EXPECT_EQ(records[4][column("converged_median_s")], "nan");  // no cold runs: not measured
   const auto& p = records.back();
@@ -553,7 +565,7 @@ TEST(BenchReport, WritesFirstFrameConvergedAndPeerColumns) {
   for (const auto& r : records) EXPECT_EQ(r.size(), records[0].size());
 
   const std::string md = testing::read_file(dir.file("bench.md"));
-  EXPECT_NE(md.find("| raymarch | step=1, lod=1 | 4.00 | 0.21 | 250 | 7 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| raymarch | step=1, lod=1 | 4.00 | 0.21 | 250 | 7 | 100 | 2 |"), std::string::npos) << md;
   EXPECT_NE(md.find("## At equal error: from empty caches to the converged image"), std::string::npos) << md;
   EXPECT_NE(md.find("## Peers"), std::string::npos) << md;
   EXPECT_NE(md.find("**vtk-fixed-point** sample=1: VTK 9.1 vtkFixedPointVolumeRayCastMapper, 2 threads; peak resident "

@@ -635,6 +635,26 @@ TEST_F(GigaVoxels, SettlingWithCompleteFramesTakesExactPassesAndShowsTheSameImag
   EXPECT_FALSE(completed.converged());
 }
 
+TEST_F(GigaVoxels, CompleteFromEmptyCachesGivesTheConvergedImageInOneFrame) {
+  // A still camera's image asked for at once (bench's "still" time): from empty caches, one
+  // complete frame of exact passes, the image the frames shown converge to.
+  const Scene sc = camera_jump_scene();
+  RenderSession refined(sc, backend_options("gigavoxels"));
+  refined.settle(0, kAll);
+  FrameBuffers want, got;
+  refined.render(0, want, kAll);
+  RenderSession still(sc, backend_options("gigavoxels"));
+  EXPECT_EQ(still.complete(still.setup(0, kAll), got), 1);
+  EXPECT_TRUE(still.converged());
+  EXPECT_EQ(got.color, want.color);
+  // And again after the caches are dropped; the frames shown afterwards are approximate.
+  still.reset_cache();
+  EXPECT_EQ(still.complete(still.setup(0, kAll), got), 1);
+  EXPECT_EQ(got.color, want.color);
+  EXPECT_EQ(still.render(1, got, kAll).backend_value("passes"), 1);
+  EXPECT_FALSE(still.converged());
+}
+
 TEST_F(GigaVoxels, BrickPoolAndCacheShareTheL1BudgetAndStillConverge) {
   // The cache's L1 keeps only the slots the loader stages its copies through (2 x upload_budget);
   // the brick pool takes the rest of the budget, not a second budget of its own. The loader asks
