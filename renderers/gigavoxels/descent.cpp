@@ -60,6 +60,8 @@ void Tracer<Voxel>::march(const PrimaryRay& ray, RayState& s, RayRecorder& rec, 
     double light_distance;
     ray_light = r.shading_.to_light_along(ray.world, 1.0, light_distance);  // the same at any t > 0
     ray_half = ShadingModel::half_vector(-ray.world.dir, ray_light);
+    // normal_of() of a zero gradient: facing the ray
+    if (gradients) ray_flat = r.shading_.lighting_with_half(facing_normal(Vec3d(0.0), ray.world.dir), ray_light, ray_half, false);
   }
   const double unit_per_t = length(ray.dir) / r.extent_;  // unit-cube length per unit t
   const double stop = r.scene_.quality.termination_opacity;

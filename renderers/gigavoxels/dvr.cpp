@@ -618,7 +618,7 @@ ShadingModel::Lighting Tracer<Voxel>::lighting_at(double t, const Vec3d& gradien
       const double length2 = dot(g, g);
       if (length2 > 0 && length2 < kInf) return r.shading_.lighting_of_gradient(g, 1 / std::sqrt(length2), ray_light, ray_half);
     }
-    return r.shading_.lighting_with_half(normal_of(gradient, ray), ray_light, ray_half, false);
+    return normal ? r.shading_.lighting_with_half(normal_of(gradient, ray), ray_light, ray_half, false) : ray_flat;
   }
   double light_distance;
   return r.shading_.lighting(normal_of(gradient, ray), -ray.world.dir, r.shading_.to_light_along(ray.world, t, light_distance), false);

@@ -47,6 +47,10 @@ struct Tracer {
   // (or none), lit by a light fixed along rays (or unlit).
   const bool runs;
   Vec3d ray_light{0.0}, ray_half{0.0};
+  // light_fixed: the lighting of a sample with a zero gradient, lit facing the ray (normal_of),
+  // the same at every such sample of the ray. Piecewise-constant data (the Shepp-Logan
+  // phantom's ellipsoids) has many.
+  ShadingModel::Lighting ray_flat;
   uint64_t samples_in_runs = 0;  // of counters.samples
   uint64_t leaps_chained = 0;    // chain_leaps' leaps, each two samples fewer
 
