@@ -37,6 +37,7 @@
 #include "cache/host_cache.h"
 #include "cache/slot_table.h"
 #include "cache/trace.h"
+#include "core/pool_memory.h"
 #include "dataset/pages.h"
 
 namespace brickyard {
@@ -254,7 +255,7 @@ class PageCache {
     RecordKind kind;
     size_t page_bytes;
     SlotTable slots;
-    std::unique_ptr<std::byte[]> pool;
+    PoolArray<std::byte> pool;
     HostCache l2;
     std::atomic<uint64_t> l3_reads{0}, l3_bytes_read{0}, l3_bytes_decoded{0}, l3_decode_ns{0};
     std::atomic<uint64_t> uploads{0}, stalls{0};

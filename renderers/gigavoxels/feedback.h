@@ -35,6 +35,8 @@
 #include <span>
 #include <vector>
 
+#include "core/pool_memory.h"
+
 namespace brickyard::gigavoxels {
 
 /// @brief The empty slot; UseBuffer::begin_frame() fills every slot with it.
@@ -164,7 +166,7 @@ class UseBuffer {
  private:
   int width_, height_, slots_per_pixel_;
   uint64_t frame_ = 0;
-  std::vector<uint32_t> slots_;
+  std::vector<uint32_t, PoolAllocator<uint32_t>> slots_;
 };
 
 /// @brief What compaction did to one stream: slots = empty + local_duplicates + out.

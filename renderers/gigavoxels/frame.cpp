@@ -19,7 +19,7 @@ template <typename Voxel>
 GigaVoxelsRenderer<Voxel>::GigaVoxelsRenderer(const RenderContext& ctx, const GigaVoxelsParams& p, std::unique_ptr<Source> source)
     : ctx_(ctx), scene_(ctx.scene()), geo_(ctx.geometry()), p_(p), shading_(scene_.shading, geo_), source_(std::move(source)),
       tree_(source_->arity(), node_blocks(ctx, p, *source_), brick_slots(ctx, p, *source_), source_->brick_size()),
-      pool_(std::make_unique_for_overwrite<Voxel[]>(size_t(tree_.brick_capacity()) * tree_.brick_values())) {
+      pool_(make_pool_array<Voxel>(size_t(tree_.brick_capacity()) * tree_.brick_values())) {
   lod_ratio_ = p.lod_ratio > 0 ? p.lod_ratio : scene_.quality.lod_ratio;
   n_ = source_->arity();
   inv_log2_arity_ = 1.0 / std::log2(double(n_));

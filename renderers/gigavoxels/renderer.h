@@ -48,6 +48,7 @@
 #include <unordered_set>
 #include <vector>
 
+#include "core/pool_memory.h"
 #include "renderers/common/renderer.h"
 #include "renderers/common/shading.h"
 #include "renderers/gigavoxels/cell_groups.h"
@@ -230,9 +231,7 @@ class GigaVoxelsRenderer final : public Renderer {
   ShadingModel shading_;
   std::unique_ptr<Source> source_;
   NodeTree tree_;
-  // The brick pool's voxels, brick_capacity() x (M + 2)^3, not zeroed: a slot is written whole
-  // before any ray reads it, and only the slots a dataset fills are committed.
-  std::unique_ptr<Voxel[]> pool_;
+  PoolArray<Voxel> pool_;  // the brick pool's voxels, brick_capacity() x (M + 2)^3
   std::optional<float> outside_value_;  // the value outside the volume, where it is defined
   std::vector<Scale> scales_;  // N^depth
   std::vector<double> inv_scales_;  // 1 / N^depth, rounded
@@ -262,7 +261,7 @@ class GigaVoxelsRenderer final : public Renderer {
   // pixel by one thread), read by the loader between passes.
   uint64_t frame_ = 0;
   std::unique_ptr<UseBuffer> uses_;
-  mutable std::vector<RayState> states_;
+  mutable std::vector<RayState, PoolAllocator<RayState>> states_;
   bool allow_interrupt_ = false;
   bool complete_frames_ = false;  // set_complete_frames()
   bool frame_exact_ = false;      // the frame under way (or the last one) takes exact passes
