@@ -332,12 +332,15 @@ void GigaVoxelsRenderer<Voxel>::serve_feedback() {
   }
   // Then the bricks the rays asked for, then subdivisions: a subdivision also asks for its
   // children's bricks before any ray needs them, which only the budget the rays left may pay.
+  // The nodes are listed first and served after, so that a blocking pass (exact mode) can
+  // have all their bricks read side by side (Source::read_ahead).
+  std::vector<uint32_t>& wanted = wanted_bricks_;
+  wanted.clear();
   for (uint32_t e : request_list_) {
     const uint32_t address = e & kAddressMask;
     const Node n = tree_.node(address);
     if (!(e & kWantsBrick) || n.has_brick() || n.constant() || transit_addresses_.contains(address)) continue;
-    if (uploads >= p_.upload_budget) break;
-    loading += serve(address) == Source::Fill::requested;
+    wanted.push_back(address);
   }
   for (uint32_t e : request_list_) {
     const uint32_t address = e & kAddressMask;
@@ -350,13 +353,24 @@ void GigaVoxelsRenderer<Voxel>::serve_feedback() {
     for (int i = 0; i < tree_.block_nodes(); ++i) {
       const NodeAddress a = tree_.address_of(base + uint32_t(i));
       tree_.set_node(base + uint32_t(i), node_for(source_->classify(a), a.depth));
+      // The children's bricks come with the subdivision when the data is at hand; the rest
+      // are requested now and copied when they arrive.
+      if (!tree_.node(base + uint32_t(i)).constant()) wanted.push_back(base + uint32_t(i));
     }
-    // The children's bricks come with the subdivision when the data is at hand; the rest
-    // are requested now and copied when they arrive.
-    for (int i = 0; i < tree_.block_nodes() && uploads < p_.upload_budget; ++i) {
-      const uint32_t child = base + uint32_t(i);
-      if (!tree_.node(child).constant()) loading += serve(child) == Source::Fill::requested;
-    }
+  }
+  if (wait && uploads < p_.upload_budget) {  // the ones the budget serves, each once
+    std::vector<uint32_t> ahead(wanted.begin(), wanted.begin() + std::ptrdiff_t(std::min(wanted.size(), size_t(p_.upload_budget - uploads))));
+    std::sort(ahead.begin(), ahead.end());
+    ahead.erase(std::unique(ahead.begin(), ahead.end()), ahead.end());
+    read_ahead_.clear();
+    for (uint32_t address : ahead) read_ahead_.push_back(tree_.address_of(address));
+    source_->read_ahead(read_ahead_);
+  }
+  for (uint32_t address : wanted) {
+    if (uploads >= p_.upload_budget) break;
+    const Node n = tree_.node(address);
+    if (n.has_brick() || n.constant() || transit_addresses_.contains(address)) continue;  // listed twice, or shared
+    loading += serve(address) == Source::Fill::requested;
   }
   // A load asked for is not a stall: it arrives in a later frame. Unless nothing has for
   // kTransitFrames (a brick that never becomes resident must not keep the frame unconverged).

@@ -282,6 +282,8 @@ class GigaVoxelsRenderer final : public Renderer {
   static constexpr uint64_t kTransitFrames = 16;
   std::vector<InTransit> in_transit_;
   std::unordered_set<uint32_t> transit_addresses_;  // in_transit_'s, rebuilt each pass (a member for its buckets)
+  std::vector<uint32_t> wanted_bricks_;   // a pass's nodes whose bricks the loader serves, in order
+  std::vector<NodeAddress> read_ahead_;   // the first of them, read side by side in an exact pass
   std::vector<float> scratch_;
   std::unordered_map<uint64_t, uint32_t> shared_;  // instanced brick id -> slot
   // Nodes whose brick could not be read (corrupt or missing in the store): drawn from the

@@ -8,6 +8,7 @@
 #include <limits>
 #include <mutex>
 
+#include "core/parallel.h"
 #include "core/value_type.h"
 #include "renderers/common/cell_accessor.h"
 #include "renderers/gigavoxels/renderer.h"  // GigaVoxelsParams
@@ -71,6 +72,15 @@ class StoreSource final : public Source {
     return Fill::filled;
   }
   uint64_t loaded() const override { return loaded_; }
+  void read_ahead(std::span<const NodeAddress> nodes) override {
+    // Into the cache's L1 (and L2) and unpinned: a pass serves at most upload_budget bricks,
+    // and the L1 keeps twice that beside the pool (l1_staging_slots). A brick that cannot be
+    // read is remembered as failed, which its fill then reports.
+    parallel_for<size_t>(0, nodes.size(), 1, [&](size_t b, size_t e) {
+      for (size_t i = b; i < e; ++i)
+        if (layout_.contains(store_key(nodes[i]))) (void)ctx_.bricks().fetch_or_failed(store_key(nodes[i]));
+    });
+  }
   void set_request_budget(uint32_t requests) override {
     const uint32_t slots = ctx_.bricks().pool_slots(), stages = slots - std::min(reserved_slots_, slots / 2);
     requests_left_ = std::min(requests, std::max(1u, stages / 2));

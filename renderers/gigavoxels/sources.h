@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 
 #include "renderers/common/renderer.h"
 #include "renderers/gigavoxels/procedural.h"
@@ -37,6 +38,11 @@ class Source {
   enum class Fill { filled, requested, missing, failed };
   /// Writes the node's (M + 2)^3 values if the data is resident. With wait, blocks until it is.
   virtual Fill fill(const NodeAddress& a, float* out, bool wait, float priority) = 0;
+  /// Reads the bricks of these nodes into the cache side by side, on the threads the pass
+  /// leaves idle, ahead of the blocking fills that copy them: a blocking fill reads its brick
+  /// on the loader's one thread, and an exact pass asks for hundreds. A hint: what the fills
+  /// then return is the same.
+  virtual void read_ahead(std::span<const NodeAddress> nodes) { (void)nodes; }
   /// Bricks shared by many nodes (instancing): an id, or 0 for a brick of its own.
   virtual uint64_t shared_id(const NodeAddress& a) const { (void)a; return 0; }
   /// Bricks computed so far, and bricks read from the store.

@@ -647,6 +647,11 @@ TEST_F(GigaVoxels, CompleteFromEmptyCachesGivesTheConvergedImageInOneFrame) {
   EXPECT_EQ(still.complete(still.setup(0, kAll), got), 1);
   EXPECT_TRUE(still.converged());
   EXPECT_EQ(got.color, want.color);
+  // Each exact pass read its bricks ahead, side by side (Source::read_ahead): the reads are
+  // the stalls, and every blocking fill then found its brick in the L1.
+  const CacheStats cs = still.pages().stats();
+  EXPECT_GT(cs.stalls, 0u);
+  EXPECT_GE(cs.l1.hits, cs.stalls);
   // And again after the caches are dropped; the frames shown afterwards are approximate.
   still.reset_cache();
   EXPECT_EQ(still.complete(still.setup(0, kAll), got), 1);
