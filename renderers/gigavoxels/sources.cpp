@@ -75,10 +75,9 @@ class StoreSource final : public Source {
   void read_ahead(std::span<const NodeAddress> nodes) override {
     // Into the cache's L1 (and L2) and unpinned: a pass serves at most upload_budget bricks,
     // and the L1 keeps twice that beside the pool (l1_staging_slots). A brick that cannot be
-    // read is remembered as failed, which its fill then reports.
+    // read is remembered as failed, which its fill then reports (as is a key outside the grid).
     parallel_for<size_t>(0, nodes.size(), 1, [&](size_t b, size_t e) {
-      for (size_t i = b; i < e; ++i)
-        if (layout_.contains(store_key(nodes[i]))) (void)ctx_.bricks().fetch_or_failed(store_key(nodes[i]));
+      for (size_t i = b; i < e; ++i) (void)ctx_.bricks().fetch_or_failed(store_key(nodes[i]));
     });
   }
   void set_request_budget(uint32_t requests) override {
